@@ -1,0 +1,9 @@
+//! `gems eval` (owned by the stage that implements it; replaced when that stage lands).
+
+/// Arguments of `gems eval`.
+#[derive(clap::Args)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    anyhow::bail!("`gems eval` is not available in this build yet")
+}

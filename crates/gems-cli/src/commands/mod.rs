@@ -1,0 +1,11 @@
+//! One module per subcommand; each exposes `Args` (clap) and `run`.
+pub mod bench;
+pub mod demo;
+pub mod edi;
+pub mod eval;
+pub mod events;
+pub mod info;
+pub mod render;
+pub mod sfm;
+pub mod synth;
+pub mod train;

@@ -1,0 +1,9 @@
+//! `gems sfm` (owned by the stage that implements it; replaced when that stage lands).
+
+/// Arguments of `gems sfm`.
+#[derive(clap::Args)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    anyhow::bail!("`gems sfm` is not available in this build yet")
+}

@@ -1,0 +1,9 @@
+//! `gems synth` (owned by the stage that implements it; replaced when that stage lands).
+
+/// Arguments of `gems synth`.
+#[derive(clap::Args)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    anyhow::bail!("`gems synth` is not available in this build yet")
+}

@@ -1,0 +1,68 @@
+//! `gems`: motion-blurred photos (and events) to a sharp 3D Gaussian-splat scene.
+//!
+//! Each subcommand lives in its own module under `commands/` and is a thin layer over the library
+//! crates: argument parsing here, the work in `gems-*`.
+
+mod commands;
+
+use clap::{Parser, Subcommand};
+use tracing_subscriber::EnvFilter;
+
+#[derive(Parser)]
+#[command(name = "gems", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Make a small extreme-blur scene, initialise, train and write a report (no downloads).
+    Demo(commands::demo::Args),
+    /// Render a Gaussian-splat PLY to PNG from one or more cameras.
+    Render(commands::render::Args),
+    /// Describe what a scene folder holds (layout, views, split, poses, SfM model, events).
+    Info(commands::info::Args),
+    /// Generate a procedural extreme-blur scene with perfect ground truth.
+    Synth(commands::synth::Args),
+    /// Event-stream tools (simulation from sharp frames).
+    #[command(subcommand)]
+    Events(commands::events::EventsCommand),
+    /// Deblur blurry images with their events (EDI) into a scene folder for initialisation.
+    Edi(commands::edi::Args),
+    /// Structure from motion on blurry images: poses, intrinsics and sparse points (COLMAP model).
+    Sfm(commands::sfm::Args),
+    /// Train a GeMS scene: Gaussians and per-image exposure trajectories from blurry images.
+    Train(commands::train::Args),
+    /// Re-run evaluation on a trained output folder.
+    Eval(commands::eval::Args),
+    /// Run the built-in benchmarks.
+    Bench(commands::bench::Args),
+}
+
+fn main() -> std::process::ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")))
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Demo(a) => commands::demo::run(a),
+        Command::Render(a) => commands::render::run(a),
+        Command::Info(a) => commands::info::run(a),
+        Command::Synth(a) => commands::synth::run(a),
+        Command::Events(a) => commands::events::run(a),
+        Command::Edi(a) => commands::edi::run(a),
+        Command::Sfm(a) => commands::sfm::run(a),
+        Command::Train(a) => commands::train::run(a),
+        Command::Eval(a) => commands::eval::run(a),
+        Command::Bench(a) => commands::bench::run(a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! `gems synth`: procedural extreme-blur scenes with perfect ground truth.
