@@ -36,8 +36,6 @@ enum Command {
     Train(commands::train::Args),
     /// Re-run evaluation on a trained output folder.
     Eval(commands::eval::Args),
-    /// Run the built-in benchmarks.
-    Bench(commands::bench::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -56,7 +54,6 @@ fn main() -> std::process::ExitCode {
         Command::Sfm(a) => commands::sfm::run(a),
         Command::Train(a) => commands::train::run(a),
         Command::Eval(a) => commands::eval::run(a),
-        Command::Bench(a) => commands::bench::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

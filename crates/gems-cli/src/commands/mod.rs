@@ -1,5 +1,4 @@
 //! One module per subcommand; each exposes `Args` (clap) and `run`.
-pub mod bench;
 pub mod demo;
 pub mod edi;
 pub mod eval;
