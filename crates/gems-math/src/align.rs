@@ -1,0 +1,155 @@
+//! Umeyama alignment (Sim(3) or SE(3)) of point sets and APE translation statistics, both exactly
+//! as evo computes them (`evo.core.geometry.umeyama_alignment`, `evo.core.metrics.APE`).
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::MathError;
+
+/// A similarity transform p ↦ s·R·p + t.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sim3 {
+    pub scale: f64,
+    pub rot: Matrix3<f64>,
+    pub trans: Vector3<f64>,
+}
+
+impl Sim3 {
+    pub fn identity() -> Self {
+        Sim3 {
+            scale: 1.0,
+            rot: Matrix3::identity(),
+            trans: Vector3::zeros(),
+        }
+    }
+
+    pub fn act(&self, p: &[f64; 3]) -> [f64; 3] {
+        (self.rot * Vector3::from(*p) * self.scale + self.trans).into()
+    }
+}
+
+/// Least-squares (s, R, t) minimising Σ‖dst_i − (s R src_i + t)‖² (Umeyama 1991, evo's variant):
+/// Σxy = (1/n) Σ (y−μy)(x−μx)ᵀ = U D Vᵀ, S = diag(1, 1, ±1) fixing reflections,
+/// R = U S Vᵀ, s = tr(D S)/σx² (or 1 without scale), t = μy − s R μx.
+pub fn umeyama(src: &[[f64; 3]], dst: &[[f64; 3]], with_scale: bool) -> Result<Sim3, MathError> {
+    if src.len() != dst.len() {
+        return Err(MathError::LengthMismatch {
+            est: src.len(),
+            reference: dst.len(),
+        });
+    }
+    let n = src.len();
+    if n == 0 {
+        return Err(MathError::Degenerate("no points to align".into()));
+    }
+    let x: Vec<Vector3<f64>> = src.iter().map(|p| Vector3::from(*p)).collect();
+    let y: Vec<Vector3<f64>> = dst.iter().map(|p| Vector3::from(*p)).collect();
+    let nf = n as f64;
+    let mx = x.iter().sum::<Vector3<f64>>() / nf;
+    let my = y.iter().sum::<Vector3<f64>>() / nf;
+    let sigma_x = x.iter().map(|p| (p - mx).norm_squared()).sum::<f64>() / nf;
+    let cov = x.iter().zip(&y).fold(Matrix3::zeros(), |acc, (px, py)| {
+        acc + (py - my) * (px - mx).transpose()
+    }) / nf;
+    let svd = cov.svd(true, true);
+    let (u, vt) = (svd.u.expect("requested U"), svd.v_t.expect("requested V"));
+    let d = svd.singular_values;
+    // evo: fewer than m−1 singular values above machine epsilon → degenerate.
+    if d.iter().filter(|&&s| s > f64::EPSILON).count() < 2 {
+        return Err(MathError::Degenerate(
+            "point sets are (nearly) collinear or coincident".into(),
+        ));
+    }
+    let mut s = Matrix3::identity();
+    // nalgebra sorts singular values in descending order, so index 2 is the smallest one.
+    if u.determinant() * vt.determinant() < 0.0 {
+        s[(2, 2)] = -1.0;
+    }
+    let rot = u * s * vt;
+    let scale = if with_scale {
+        if sigma_x <= 0.0 {
+            return Err(MathError::Degenerate("source points have zero spread".into()));
+        }
+        (Matrix3::from_diagonal(&d) * s).trace() / sigma_x
+    } else {
+        1.0
+    };
+    let trans = my - rot * mx * scale;
+    Ok(Sim3 { scale, rot, trans })
+}
+
+/// Error statistics with evo's definitions (population std, numpy median).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ApeStats {
+    pub rmse: f64,
+    pub mean: f64,
+    pub median: f64,
+    pub std: f64,
+    pub min: f64,
+    pub max: f64,
+    pub sse: f64,
+}
+
+/// Statistics of a list of per-pose errors. Errors on an empty list.
+pub fn error_stats(errors: &[f64]) -> Result<ApeStats, MathError> {
+    if errors.is_empty() {
+        return Err(MathError::Degenerate("no errors to summarise".into()));
+    }
+    let n = errors.len() as f64;
+    let sse: f64 = errors.iter().map(|e| e * e).sum();
+    let mean = errors.iter().sum::<f64>() / n;
+    let std = (errors.iter().map(|e| (e - mean) * (e - mean)).sum::<f64>() / n).sqrt();
+    let mut sorted = errors.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let m = sorted.len();
+    let median = if m % 2 == 1 {
+        sorted[m / 2]
+    } else {
+        0.5 * (sorted[m / 2 - 1] + sorted[m / 2])
+    };
+    Ok(ApeStats {
+        rmse: (sse / n).sqrt(),
+        mean,
+        median,
+        std,
+        min: sorted[0],
+        max: sorted[m - 1],
+        sse,
+    })
+}
+
+/// How the estimate is aligned to the reference before measuring errors.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Alignment {
+    /// No alignment.
+    None,
+    /// Rigid (evo `-a`).
+    Se3,
+    /// Similarity (evo `-as`), for scale-free SfM estimates.
+    Sim3,
+}
+
+/// APE translation part: aligns the estimated positions to the reference, then
+/// e_i = ‖p'_est,i − p_ref,i‖. Returns the statistics and the alignment used.
+pub fn ape_translation(
+    est: &[[f64; 3]],
+    reference: &[[f64; 3]],
+    alignment: Alignment,
+) -> Result<(ApeStats, Sim3), MathError> {
+    if est.len() != reference.len() {
+        return Err(MathError::LengthMismatch {
+            est: est.len(),
+            reference: reference.len(),
+        });
+    }
+    let sim = match alignment {
+        Alignment::None => Sim3::identity(),
+        Alignment::Se3 => umeyama(est, reference, false)?,
+        Alignment::Sim3 => umeyama(est, reference, true)?,
+    };
+    let errors: Vec<f64> = est
+        .iter()
+        .zip(reference)
+        .map(|(p, r)| (Vector3::from(sim.act(p)) - Vector3::from(*r)).norm())
+        .collect();
+    Ok((error_stats(&errors)?, sim))
+}

@@ -1,0 +1,299 @@
+//! Camera trajectories inside the exposure, u ∈ [0, 1], as right-composed deltas Δ(u) on a
+//! camera-to-world pose: c2w(u) = c2w_init · Δ(u). Knots are se(3) vectors [ρ; φ].
+//!
+//! Every variant offers [`Trajectory::eval_with_jacobians`], whose J_j maps a change of knot j to
+//! the RIGHT perturbation δ of Δ(u): Δ(u; ξ_j + dξ) ≈ Δ(u) · Exp(J_j dξ). Because c2w_init is a
+//! constant left factor, δ is also the right perturbation of c2w(u), which is what
+//! [`crate::posegrad::c2w_right_perturbation_gradient`] produces from renderer gradients.
+
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+
+use crate::MathError;
+use crate::se3::{Se3, se3_right_jacobian};
+use crate::so3::{So3, so3_left_jacobian_inv, so3_right_jacobian, so3_right_jacobian_inv};
+
+/// Which curve family a trajectory uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum TrajectoryKind {
+    /// GeMS Eq. (8): Δ(u) = Π_{j=0..M} Exp(b_j(u) ξ_j), Bernstein b_j of degree M, product in
+    /// order j = 0..M (BAD-Gaussians / PRISM3D "right product").
+    Bezier,
+    /// Two knots T_k = Exp(ξ_k); split interpolation as BAD-Gaussians: t(u) = (1−u)t₀ + u t₁,
+    /// R(u) = R₀ Exp(u Log(R₀ᵀR₁)).
+    Linear,
+    /// Four knots T_k = Exp(ξ_k); uniform cumulative cubic B-spline of BAD-Gaussians: translation
+    /// with the plain B-spline basis, rotation R₀ Π_k Exp(B̃_k(u) Log(R_{k−1}ᵀR_k)).
+    CubicBSpline,
+}
+
+impl TrajectoryKind {
+    /// The knot count the variant requires, or `None` when any count ≥ 1 is allowed (Bézier).
+    pub fn required_knots(self) -> Option<usize> {
+        match self {
+            TrajectoryKind::Bezier => None,
+            TrajectoryKind::Linear => Some(2),
+            TrajectoryKind::CubicBSpline => Some(4),
+        }
+    }
+
+    /// Default knot count: 9 for Bézier (the paper's 9 control points), else the required one.
+    pub fn default_knots(self) -> usize {
+        self.required_knots().unwrap_or(9)
+    }
+}
+
+/// A camera trajectory over the exposure, parameterised by se(3) knots ([ρ; φ] each).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Trajectory {
+    Bezier(Vec<[f64; 6]>),
+    Linear([[f64; 6]; 2]),
+    CubicBSpline([[f64; 6]; 4]),
+}
+
+/// A 6×6 Jacobian, row-major: `j[r][c] = ∂δ_r / ∂ξ_c`.
+pub type Jacobian6 = [[f64; 6]; 6];
+
+fn to_rows(m: &Matrix6<f64>) -> Jacobian6 {
+    let mut out = [[0.0; 6]; 6];
+    for (r, row) in out.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = m[(r, c)];
+        }
+    }
+    out
+}
+
+/// Bernstein basis of degree `n` at u: C(n, j)(1−u)^(n−j) u^j for j = 0..=n.
+pub fn bernstein(n: usize, u: f64) -> Vec<f64> {
+    let mut binom = 1.0f64;
+    (0..=n)
+        .map(|j| {
+            let b = binom * (1.0 - u).powi((n - j) as i32) * u.powi(j as i32);
+            binom = binom * (n - j) as f64 / (j + 1) as f64;
+            b
+        })
+        .collect()
+}
+
+impl Trajectory {
+    /// Builds a trajectory, checking the knot count of the variant.
+    pub fn new(kind: TrajectoryKind, knots: Vec<[f64; 6]>) -> Result<Self, MathError> {
+        let bad = |expected: usize| MathError::KnotCount {
+            kind,
+            expected,
+            got: knots.len(),
+        };
+        Ok(match kind {
+            TrajectoryKind::Bezier => {
+                if knots.is_empty() {
+                    return Err(bad(1));
+                }
+                Trajectory::Bezier(knots)
+            }
+            TrajectoryKind::Linear => Trajectory::Linear(knots.as_slice().try_into().map_err(|_| bad(2))?),
+            TrajectoryKind::CubicBSpline => {
+                Trajectory::CubicBSpline(knots.as_slice().try_into().map_err(|_| bad(4))?)
+            }
+        })
+    }
+
+    /// All knots zero: Δ(u) = identity for every u.
+    pub fn identity(kind: TrajectoryKind, num_knots: usize) -> Result<Self, MathError> {
+        Self::new(kind, vec![[0.0; 6]; num_knots])
+    }
+
+    pub fn kind(&self) -> TrajectoryKind {
+        match self {
+            Trajectory::Bezier(_) => TrajectoryKind::Bezier,
+            Trajectory::Linear(_) => TrajectoryKind::Linear,
+            Trajectory::CubicBSpline(_) => TrajectoryKind::CubicBSpline,
+        }
+    }
+
+    pub fn knots(&self) -> &[[f64; 6]] {
+        match self {
+            Trajectory::Bezier(k) => k,
+            Trajectory::Linear(k) => k,
+            Trajectory::CubicBSpline(k) => k,
+        }
+    }
+
+    /// Mutable knots, for an optimiser updating them in place.
+    pub fn knots_mut(&mut self) -> &mut [[f64; 6]] {
+        match self {
+            Trajectory::Bezier(k) => k,
+            Trajectory::Linear(k) => k,
+            Trajectory::CubicBSpline(k) => k,
+        }
+    }
+
+    pub fn num_knots(&self) -> usize {
+        self.knots().len()
+    }
+
+    /// Δ(u). `u` is clamped to [0, 1].
+    pub fn eval(&self, u: f64) -> Se3 {
+        let u = u.clamp(0.0, 1.0);
+        match self {
+            Trajectory::Bezier(k) => {
+                let b = bernstein(k.len() - 1, u);
+                k.iter().zip(&b).fold(Se3::identity(), |acc, (xi, &bj)| {
+                    acc * Se3::exp(&(Vector6::from(*xi) * bj))
+                })
+            }
+            Trajectory::Linear(k) => SplitSpline::new(k, u).pose(),
+            Trajectory::CubicBSpline(k) => SplitSpline::new(k, u).pose(),
+        }
+    }
+
+    /// Δ(u) and, per knot j, J_j with Δ(u; ξ_j + dξ) ≈ Δ(u) · Exp(J_j dξ).
+    pub fn eval_with_jacobians(&self, u: f64) -> (Se3, Vec<Jacobian6>) {
+        let u = u.clamp(0.0, 1.0);
+        match self {
+            Trajectory::Bezier(k) => bezier_with_jacobians(k, u),
+            Trajectory::Linear(k) => SplitSpline::new(k, u).with_jacobians(),
+            Trajectory::CubicBSpline(k) => SplitSpline::new(k, u).with_jacobians(),
+        }
+    }
+
+    /// Adds J_jᵀ g to `out[j]` for every knot, where g = dL/dδ is the gradient w.r.t. the right
+    /// perturbation of Δ(u) (equivalently of c2w(u)). Returns Δ(u). `out.len()` must equal the knot
+    /// count.
+    pub fn accumulate_knot_gradients(&self, u: f64, grad_delta: &[f64; 6], out: &mut [[f64; 6]]) -> Se3 {
+        assert_eq!(
+            out.len(),
+            self.num_knots(),
+            "gradient buffer length != knot count"
+        );
+        let (pose, jacs) = self.eval_with_jacobians(u);
+        for (o, j) in out.iter_mut().zip(&jacs) {
+            for (c, oc) in o.iter_mut().enumerate() {
+                *oc += (0..6).map(|r| j[r][c] * grad_delta[r]).sum::<f64>();
+            }
+        }
+        pose
+    }
+}
+
+fn bezier_with_jacobians(knots: &[[f64; 6]], u: f64) -> (Se3, Vec<Jacobian6>) {
+    let b = bernstein(knots.len() - 1, u);
+    let scaled: Vec<Vector6<f64>> = knots
+        .iter()
+        .zip(&b)
+        .map(|(k, &bj)| Vector6::from(*k) * bj)
+        .collect();
+    let factors: Vec<Se3> = scaled.iter().map(Se3::exp).collect();
+    // suffix[j] = E_{j+1} ··· E_M: the part of the product to the right of factor j.
+    let mut suffix = vec![Se3::identity(); knots.len()];
+    for j in (0..knots.len() - 1).rev() {
+        suffix[j] = factors[j + 1] * suffix[j + 1];
+    }
+    let pose = factors[0] * suffix[0];
+    // A E_j Exp(η) S = A E_j S Exp(Ad(S⁻¹) η), and E_j(ξ_j + dξ) ≈ E_j Exp(b_j 𝒥_r(b_j ξ_j) dξ).
+    let jacs = (0..knots.len())
+        .map(|j| to_rows(&(suffix[j].inverse().adjoint() * se3_right_jacobian(&scaled[j]) * b[j])))
+        .collect();
+    (pose, jacs)
+}
+
+/// Shared machinery of the linear and cubic B-spline variants: translations blended with weights
+/// `tw`, rotations as R₀ · Π_k Exp(c_k Log(R_{k−1}ᵀ R_k)).
+struct SplitSpline {
+    xi: Vec<Vector6<f64>>,
+    knots: Vec<Se3>,
+    tw: Vec<f64>,
+    cw: Vec<f64>,
+    rel: Vec<Vector3<f64>>,
+    factors: Vec<Matrix3<f64>>,
+}
+
+impl SplitSpline {
+    fn new(knots: &[[f64; 6]], u: f64) -> Self {
+        let (tw, cw) = if knots.len() == 2 {
+            (vec![1.0 - u, u], vec![u])
+        } else {
+            let (u2, u3) = (u * u, u * u * u);
+            (
+                vec![
+                    (1.0 - 3.0 * u + 3.0 * u2 - u3) / 6.0,
+                    (4.0 - 6.0 * u2 + 3.0 * u3) / 6.0,
+                    (1.0 + 3.0 * u + 3.0 * u2 - 3.0 * u3) / 6.0,
+                    u3 / 6.0,
+                ],
+                vec![
+                    (5.0 + 3.0 * u - 3.0 * u2 + u3) / 6.0,
+                    (1.0 + 3.0 * u + 3.0 * u2 - 2.0 * u3) / 6.0,
+                    u3 / 6.0,
+                ],
+            )
+        };
+        let xi: Vec<Vector6<f64>> = knots.iter().map(|k| Vector6::from(*k)).collect();
+        let poses: Vec<Se3> = xi.iter().map(Se3::exp).collect();
+        // rel[k-1] = Log(R_{k−1}ᵀ R_k), factors[k-1] = Exp(c_k rel[k-1]) for k = 1..K−1.
+        let rel: Vec<Vector3<f64>> = poses
+            .windows(2)
+            .map(|w| So3(w[0].rot.transpose() * w[1].rot).log())
+            .collect();
+        let factors = rel.iter().zip(&cw).map(|(r, &c)| So3::exp(&(r * c)).0).collect();
+        SplitSpline {
+            xi,
+            knots: poses,
+            tw,
+            cw,
+            rel,
+            factors,
+        }
+    }
+
+    fn rotation(&self) -> Matrix3<f64> {
+        self.factors.iter().fold(self.knots[0].rot, |acc, f| acc * f)
+    }
+
+    fn pose(&self) -> Se3 {
+        let t = self
+            .knots
+            .iter()
+            .zip(&self.tw)
+            .fold(Vector3::zeros(), |acc, (k, &w)| acc + k.trans * w);
+        Se3::new(self.rotation(), t)
+    }
+
+    fn with_jacobians(&self) -> (Se3, Vec<Jacobian6>) {
+        let pose = self.pose();
+        let n = self.knots.len();
+        let segs = self.factors.len();
+        // suffix[k] = F_{k+1} ··· F_last (segment indices 0-based), so Π F = F_0 · suffix[0].
+        let mut suffix = vec![Matrix3::identity(); segs];
+        for k in (0..segs - 1).rev() {
+            suffix[k] = self.factors[k + 1] * suffix[k + 1];
+        }
+        let all = self.factors[0] * suffix[0];
+        // g[k]: right-perturbation of R(u) per unit change of rel[k].
+        let g: Vec<Matrix3<f64>> = (0..segs)
+            .map(|k| suffix[k].transpose() * so3_right_jacobian(&(self.rel[k] * self.cw[k])) * self.cw[k])
+            .collect();
+        let jacs = (0..n)
+            .map(|i| {
+                // Rotation block: a right perturbation a of R_i changes R₀ (if i = 0), rel[i−1]
+                // by J_r⁻¹ a and rel[i] by −J_l⁻¹ a.
+                let mut drot = Matrix3::zeros();
+                if i == 0 {
+                    drot += all.transpose();
+                }
+                if i >= 1 {
+                    drot += g[i - 1] * so3_right_jacobian_inv(&self.rel[i - 1]);
+                }
+                if i < segs {
+                    drot -= g[i] * so3_left_jacobian_inv(&self.rel[i]);
+                }
+                // Translation block: a right perturbation η_ρ of T_i moves t_i by R_i η_ρ.
+                let dtrans = pose.rot.transpose() * self.knots[i].rot * self.tw[i];
+                let mut m = Matrix6::zeros();
+                m.fixed_view_mut::<3, 3>(0, 0).copy_from(&dtrans);
+                m.fixed_view_mut::<3, 3>(3, 3).copy_from(&drot);
+                to_rows(&(m * se3_right_jacobian(&self.xi[i])))
+            })
+            .collect();
+        (pose, jacs)
+    }
+}
