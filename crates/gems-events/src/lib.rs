@@ -1,2 +1,112 @@
-//! Event-camera streams: one columnar type, readers for the common file formats, and an
-//! ESIM-style simulator that turns timestamped sharp frames into events.
+//! Event-camera streams for gems: one columnar type, readers/writers for the common file formats,
+//! and an ESIM-style simulator that turns timestamped sharp frames into events.
+//!
+//! # Data model
+//! [`EventStream`] holds time-sorted events column-wise: `t: i64` **microseconds**, `x`/`y: u16`
+//! pixel column/row, `p: i8` polarity ±1, plus the sensor `width × height`. [`EventStream::window`]
+//! returns a borrowed [`EventSlice`] of the events in `[t0, t1]` by binary search (no copy).
+//! [`BinCounts`] is the signed per-bin count tensor `[views, bins, H, W]` used by E2NeRF/GeMS-E.
+//!
+//! # Files
+//! - [`read_events`] dispatches on the extension: `.txt`/`.csv` ECD/v2e text, `.npy`/`.npz`,
+//!   `.aedat4` (events only; [`read_aedat4`] also returns the APS frames with their exposure times).
+//! - [`write_events_npz`] / [`write_events_text`] write atomically (temp file + rename).
+//! - [`read_exposure_windows`] reads `exposure_start_ts.txt`/`exposure_end_ts.txt`.
+//! - [`read_bin_counts`] / [`write_bin_counts`] handle count tensors as `.npy`.
+//!
+//! # Simulation
+//! [`Simulator`] (`new(config, width, height)`, then `feed_luma`/`feed_rgb` per frame, `finish`)
+//! follows ESIM; [`simulate_folder`] runs it over a folder of timestamped frames.
+
+mod aedat;
+mod exposure;
+mod folder;
+mod npy;
+mod read;
+mod sim;
+mod stream;
+mod text;
+
+use std::path::PathBuf;
+
+pub use aedat::{AedatFrame, AedatRecording, read_aedat4};
+pub use exposure::{ExposureWindow, read_exposure_windows};
+pub use folder::{FrameEncoding, list_frames, read_luminance, simulate_folder};
+pub use npy::{read_bin_counts, read_events_npy, write_bin_counts, write_events_npz};
+pub use read::{ReadOptions, TimeUnit, read_events};
+pub use sim::{SimConfig, Simulator, luminance};
+pub use stream::{BinCounts, EventSlice, EventStream};
+pub use text::{read_events_text, write_events_text};
+
+/// Everything that can go wrong reading, writing or simulating events. File errors name the file.
+#[derive(Debug, thiserror::Error)]
+pub enum EventError {
+    /// The operating system refused a read or write.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The file's contents are not what its format requires.
+    #[error("{path}: {msg}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, with the position where known.
+        msg: String,
+    },
+    /// In-memory data violates an invariant (lengths, ranges, ordering, parameters).
+    #[error("invalid event data: {0}")]
+    Invalid(String),
+}
+
+impl EventError {
+    pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
+        EventError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+    pub(crate) fn format(path: &std::path::Path, msg: impl Into<String>) -> Self {
+        EventError::Format {
+            path: path.to_path_buf(),
+            msg: msg.into(),
+        }
+    }
+}
+
+/// Writes `bytes` produced by `fill` to `path` atomically: a temporary file in the same folder is
+/// written, flushed and renamed over `path`, so readers never see a half-written file.
+pub(crate) fn write_atomic(
+    path: &std::path::Path,
+    fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
+) -> Result<(), EventError> {
+    use std::io::Write;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let name = path
+        .file_name()
+        .ok_or_else(|| EventError::format(path, "not a file path"))?;
+    let tmp = dir.join(format!(
+        ".{}.tmp{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    let result = (|| {
+        let file = std::fs::File::create(&tmp)?;
+        let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
+        fill(&mut w)?;
+        w.flush()?;
+        w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(EventError::io(path, e));
+    }
+    Ok(())
+}
