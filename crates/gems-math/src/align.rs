@@ -67,7 +67,9 @@ pub fn umeyama(src: &[[f64; 3]], dst: &[[f64; 3]], with_scale: bool) -> Result<S
     let rot = u * s * vt;
     let scale = if with_scale {
         if sigma_x <= 0.0 {
-            return Err(MathError::Degenerate("source points have zero spread".into()));
+            return Err(MathError::Degenerate(
+                "source points have zero spread".into(),
+            ));
         }
         (Matrix3::from_diagonal(&d) * s).trace() / sigma_x
     } else {

@@ -126,7 +126,14 @@ impl Se3 {
                 *v = self.rot[(i, j)] as f32;
             }
         }
-        (r, [self.trans.x as f32, self.trans.y as f32, self.trans.z as f32])
+        (
+            r,
+            [
+                self.trans.x as f32,
+                self.trans.y as f32,
+                self.trans.z as f32,
+            ],
+        )
     }
 
     /// Inverse of [`Se3::to_f32_arrays`]. The rotation is re-orthonormalised because f32 rounding

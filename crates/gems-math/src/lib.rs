@@ -32,11 +32,12 @@ pub use convert::{
 pub use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 pub use posegrad::{c2w_right_perturbation_gradient, w2c_left_perturbation_gradient};
 pub use se3::{
-    Se3, join_tangent, se3_left_jacobian, se3_left_jacobian_inv, se3_right_jacobian, se3_right_jacobian_inv,
-    split_tangent,
+    Se3, join_tangent, se3_left_jacobian, se3_left_jacobian_inv, se3_right_jacobian,
+    se3_right_jacobian_inv, split_tangent,
 };
 pub use so3::{
-    So3, hat, so3_left_jacobian, so3_left_jacobian_inv, so3_right_jacobian, so3_right_jacobian_inv, vee,
+    So3, hat, so3_left_jacobian, so3_left_jacobian_inv, so3_right_jacobian, so3_right_jacobian_inv,
+    vee,
 };
 pub use trajectory::{Jacobian6, Trajectory, TrajectoryKind, bernstein};
 

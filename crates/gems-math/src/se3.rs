@@ -2,7 +2,9 @@
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
-use crate::so3::{SERIES_ANGLE, So3, alt_factorial_series, hat, so3_left_jacobian, so3_left_jacobian_inv};
+use crate::so3::{
+    SERIES_ANGLE, So3, alt_factorial_series, hat, so3_left_jacobian, so3_left_jacobian_inv,
+};
 
 /// A rigid transform p ↦ R p + t.
 #[derive(Clone, Copy, Debug, PartialEq)]

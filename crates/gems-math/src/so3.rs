@@ -146,7 +146,8 @@ fn inv_jac_coeff(theta: f64) -> f64 {
     // truncation error of five terms is far below that.
     if theta < 0.1 {
         let t2 = theta * theta;
-        1.0 / 12.0 + t2 * (1.0 / 720.0 + t2 * (1.0 / 30240.0 + t2 * (1.0 / 1209600.0 + t2 / 47900160.0)))
+        1.0 / 12.0
+            + t2 * (1.0 / 720.0 + t2 * (1.0 / 30240.0 + t2 * (1.0 / 1209600.0 + t2 / 47900160.0)))
     } else {
         let (s, c) = theta.sin_cos();
         1.0 / (theta * theta) - (1.0 + c) / (2.0 * theta * s)

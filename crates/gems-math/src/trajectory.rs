@@ -90,7 +90,9 @@ impl Trajectory {
                 }
                 Trajectory::Bezier(knots)
             }
-            TrajectoryKind::Linear => Trajectory::Linear(knots.as_slice().try_into().map_err(|_| bad(2))?),
+            TrajectoryKind::Linear => {
+                Trajectory::Linear(knots.as_slice().try_into().map_err(|_| bad(2))?)
+            }
             TrajectoryKind::CubicBSpline => {
                 Trajectory::CubicBSpline(knots.as_slice().try_into().map_err(|_| bad(4))?)
             }
@@ -159,7 +161,12 @@ impl Trajectory {
     /// Adds J_jᵀ g to `out[j]` for every knot, where g = dL/dδ is the gradient w.r.t. the right
     /// perturbation of Δ(u) (equivalently of c2w(u)). Returns Δ(u). `out.len()` must equal the knot
     /// count.
-    pub fn accumulate_knot_gradients(&self, u: f64, grad_delta: &[f64; 6], out: &mut [[f64; 6]]) -> Se3 {
+    pub fn accumulate_knot_gradients(
+        &self,
+        u: f64,
+        grad_delta: &[f64; 6],
+        out: &mut [[f64; 6]],
+    ) -> Se3 {
         assert_eq!(
             out.len(),
             self.num_knots(),
@@ -234,7 +241,11 @@ impl SplitSpline {
             .windows(2)
             .map(|w| So3(w[0].rot.transpose() * w[1].rot).log())
             .collect();
-        let factors = rel.iter().zip(&cw).map(|(r, &c)| So3::exp(&(r * c)).0).collect();
+        let factors = rel
+            .iter()
+            .zip(&cw)
+            .map(|(r, &c)| So3::exp(&(r * c)).0)
+            .collect();
         SplitSpline {
             xi,
             knots: poses,
@@ -246,7 +257,9 @@ impl SplitSpline {
     }
 
     fn rotation(&self) -> Matrix3<f64> {
-        self.factors.iter().fold(self.knots[0].rot, |acc, f| acc * f)
+        self.factors
+            .iter()
+            .fold(self.knots[0].rot, |acc, f| acc * f)
     }
 
     fn pose(&self) -> Se3 {
@@ -270,7 +283,9 @@ impl SplitSpline {
         let all = self.factors[0] * suffix[0];
         // g[k]: right-perturbation of R(u) per unit change of rel[k].
         let g: Vec<Matrix3<f64>> = (0..segs)
-            .map(|k| suffix[k].transpose() * so3_right_jacobian(&(self.rel[k] * self.cw[k])) * self.cw[k])
+            .map(|k| {
+                suffix[k].transpose() * so3_right_jacobian(&(self.rel[k] * self.cw[k])) * self.cw[k]
+            })
             .collect();
         let jacs = (0..n)
             .map(|i| {

@@ -63,7 +63,10 @@ fn fd_so3_jac(phi: &Vector3<f64>, left: bool) -> Matrix3<f64> {
         p[c] += h;
         let mut q = *phi;
         q[c] -= h;
-        m.set_column(c, &((diff(&So3::exp(&p)) - diff(&So3::exp(&q))) / (2.0 * h)));
+        m.set_column(
+            c,
+            &((diff(&So3::exp(&p)) - diff(&So3::exp(&q))) / (2.0 * h)),
+        );
     }
     m
 }
@@ -95,7 +98,10 @@ fn se3_jacobians_match_finite_differences() {
         let ir = (se3_right_jacobian_inv(&xi) * jr - Matrix6::identity())
             .abs()
             .max();
-        assert!(il < 1e-12 && ir < 1e-12, "inverse Jacobians at {xi:?}: {il} {ir}");
+        assert!(
+            il < 1e-12 && ir < 1e-12,
+            "inverse Jacobians at {xi:?}: {il} {ir}"
+        );
     }
 }
 
@@ -160,11 +166,19 @@ fn series_branches_are_continuous() {
 
 #[test]
 fn log_near_pi_and_identity() {
-    for angle in [std::f64::consts::PI, std::f64::consts::PI - 1e-9, 1e-12, 0.0] {
+    for angle in [
+        std::f64::consts::PI,
+        std::f64::consts::PI - 1e-9,
+        1e-12,
+        0.0,
+    ] {
         let axis = v3([0.2, -0.9, 0.4]).normalize();
         let r = So3::exp(&(axis * angle));
         let phi = r.log();
-        assert!(max_abs_diff3(&So3::exp(&phi).0, &r.0) < 1e-12, "angle {angle}");
+        assert!(
+            max_abs_diff3(&So3::exp(&phi).0, &r.0) < 1e-12,
+            "angle {angle}"
+        );
         assert!(
             (phi.norm() - angle).abs() < 1e-8,
             "angle {angle}: got {}",
@@ -193,7 +207,9 @@ fn quaternion_conventions() {
     }
     assert!((r.act(&Vector3::x()) - Vector3::y()).norm() < 1e-12);
     let (axis, angle) = rotation_to_axis_angle(&r);
-    assert!((axis - Vector3::z()).norm() < 1e-12 && (angle - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    assert!(
+        (axis - Vector3::z()).norm() < 1e-12 && (angle - std::f64::consts::FRAC_PI_2).abs() < 1e-12
+    );
 }
 
 #[test]

@@ -1,0 +1,120 @@
+//! Umeyama alignment and APE statistics (evo definitions).
+
+use gems_math::*;
+
+fn lcg(state: &mut u64) -> f64 {
+    // Deterministic uniform(-1, 1) for test noise without a rand dependency.
+    *state = state
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+}
+
+fn points(n: usize, seed: u64) -> Vec<[f64; 3]> {
+    let mut s = seed;
+    (0..n)
+        .map(|_| [lcg(&mut s) * 3.0, lcg(&mut s) * 2.0, lcg(&mut s)])
+        .collect()
+}
+
+fn known_sim() -> Sim3 {
+    Sim3 {
+        scale: 2.5,
+        rot: So3::exp(&Vector3::new(0.3, -1.2, 0.8)).0,
+        trans: Vector3::new(1.0, -4.0, 0.5),
+    }
+}
+
+#[test]
+fn recovers_known_similarity_exactly() {
+    let src = points(20, 7);
+    let sim = known_sim();
+    let dst: Vec<[f64; 3]> = src.iter().map(|p| sim.act(p)).collect();
+    let est = umeyama(&src, &dst, true).unwrap();
+    assert!((est.scale - sim.scale).abs() < 1e-12);
+    assert!((est.rot - sim.rot).abs().max() < 1e-12);
+    assert!((est.trans - sim.trans).norm() < 1e-11);
+    let (stats, _) = ape_translation(&src, &dst, Alignment::Sim3).unwrap();
+    assert!(stats.rmse < 1e-11 && stats.max < 1e-11);
+    // Rigid alignment cannot absorb the scale.
+    let (rigid, _) = ape_translation(&src, &dst, Alignment::Se3).unwrap();
+    assert!(rigid.rmse > 0.5);
+}
+
+#[test]
+fn recovers_similarity_under_noise() {
+    let src = points(200, 11);
+    let sim = known_sim();
+    let mut s = 99u64;
+    let sigma = 0.01;
+    let dst: Vec<[f64; 3]> = src
+        .iter()
+        .map(|p| {
+            let q = sim.act(p);
+            [
+                q[0] + sigma * lcg(&mut s),
+                q[1] + sigma * lcg(&mut s),
+                q[2] + sigma * lcg(&mut s),
+            ]
+        })
+        .collect();
+    let est = umeyama(&src, &dst, true).unwrap();
+    assert!((est.scale - sim.scale).abs() < 2e-3, "scale {}", est.scale);
+    assert!(So3(sim.rot.transpose() * est.rot).log().norm() < 2e-3);
+    let (stats, _) = ape_translation(&src, &dst, Alignment::Sim3).unwrap();
+    // Uniform(−σ, σ) per axis: E‖n‖² = 3σ²/3 = σ², so rmse ≈ σ.
+    assert!(
+        stats.rmse > 0.7 * sigma && stats.rmse < 1.1 * sigma,
+        "rmse {}",
+        stats.rmse
+    );
+}
+
+#[test]
+fn handles_reflection_and_rigid_case() {
+    // Planar-ish data whose naive SVD solution is a reflection must still give det R = +1.
+    let src = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+    ];
+    let dst: Vec<[f64; 3]> = src.iter().map(|p| [p[0], -p[1], p[2]]).collect();
+    let est = umeyama(&src, &dst, false).unwrap();
+    assert!((est.rot.determinant() - 1.0).abs() < 1e-12);
+    let rigid = Sim3 {
+        scale: 1.0,
+        ..known_sim()
+    };
+    let pts = points(10, 3);
+    let moved: Vec<[f64; 3]> = pts.iter().map(|p| rigid.act(p)).collect();
+    let est = umeyama(&pts, &moved, false).unwrap();
+    assert_eq!(est.scale, 1.0);
+    assert!((est.rot - rigid.rot).abs().max() < 1e-12);
+}
+
+#[test]
+fn rejects_bad_input() {
+    assert!(matches!(
+        umeyama(&points(3, 1), &points(4, 1), true),
+        Err(MathError::LengthMismatch { .. })
+    ));
+    let collinear: Vec<[f64; 3]> = (0..5).map(|i| [i as f64, 2.0 * i as f64, 0.0]).collect();
+    assert!(matches!(
+        umeyama(&collinear, &collinear, true),
+        Err(MathError::Degenerate(_))
+    ));
+    assert!(error_stats(&[]).is_err());
+}
+
+#[test]
+fn statistics_follow_evo() {
+    let s = error_stats(&[4.0, 1.0, 3.0, 2.0]).unwrap();
+    assert_eq!(s.sse, 30.0);
+    assert!((s.rmse - 7.5f64.sqrt()).abs() < 1e-15);
+    assert_eq!(s.mean, 2.5);
+    assert_eq!(s.median, 2.5);
+    assert!((s.std - 1.25f64.sqrt()).abs() < 1e-15, "population std");
+    assert_eq!((s.min, s.max), (1.0, 4.0));
+    assert_eq!(error_stats(&[5.0, 1.0, 3.0]).unwrap().median, 3.0);
+}

@@ -1,0 +1,221 @@
+//! Exposure trajectories: endpoint/constant properties, knot Jacobians vs central finite
+//! differences, the pose-gradient bridge and the whole render-gradient → knot-gradient chain.
+
+use gems_math::*;
+
+fn knots(n: usize, scale: f64) -> Vec<[f64; 6]> {
+    (0..n)
+        .map(|j| {
+            let s = scale * (1.0 + 0.37 * j as f64);
+            let a = j as f64 * 0.9;
+            [
+                s * a.cos(),
+                -0.5 * s,
+                0.3 * s * a.sin(),
+                0.2 * s,
+                -s * (a * 0.5).cos(),
+                0.7 * s,
+            ]
+        })
+        .collect()
+}
+
+fn close(a: &Se3, b: &Se3, tol: f64) -> bool {
+    (a.rot - b.rot).abs().max() < tol && (a.trans - b.trans).norm() < tol
+}
+
+fn all_kinds() -> [TrajectoryKind; 3] {
+    [
+        TrajectoryKind::Bezier,
+        TrajectoryKind::Linear,
+        TrajectoryKind::CubicBSpline,
+    ]
+}
+
+#[test]
+fn endpoints_are_the_end_knots() {
+    for kind in [TrajectoryKind::Bezier, TrajectoryKind::Linear] {
+        let k = knots(kind.default_knots(), 0.3);
+        let t = Trajectory::new(kind, k.clone()).unwrap();
+        let first = Se3::exp(&Vector6::from(k[0]));
+        let last = Se3::exp(&Vector6::from(*k.last().unwrap()));
+        assert!(close(&t.eval(0.0), &first, 1e-12), "{kind:?} u=0");
+        assert!(close(&t.eval(1.0), &last, 1e-12), "{kind:?} u=1");
+        // And not trivially: the middle differs from both ends.
+        assert!(!close(&t.eval(0.5), &first, 1e-3) && !close(&t.eval(0.5), &last, 1e-3));
+    }
+}
+
+#[test]
+fn equal_knots_give_that_pose() {
+    let xi = [0.2, -0.4, 0.9, 0.5, -0.3, 1.1];
+    let pose = Se3::exp(&Vector6::from(xi));
+    for kind in all_kinds() {
+        let t = Trajectory::new(kind, vec![xi; kind.default_knots()]).unwrap();
+        for u in [0.0, 0.13, 0.5, 0.77, 1.0] {
+            assert!(close(&t.eval(u), &pose, 1e-12), "{kind:?} at u={u}");
+        }
+    }
+}
+
+#[test]
+fn knot_counts_are_checked() {
+    assert!(Trajectory::new(TrajectoryKind::Linear, knots(3, 0.1)).is_err());
+    assert!(Trajectory::new(TrajectoryKind::CubicBSpline, knots(2, 0.1)).is_err());
+    assert!(Trajectory::new(TrajectoryKind::Bezier, vec![]).is_err());
+    let single = Trajectory::new(TrajectoryKind::Bezier, knots(1, 0.2)).unwrap();
+    assert!(close(
+        &single.eval(0.4),
+        &Se3::exp(&Vector6::from(knots(1, 0.2)[0])),
+        1e-12
+    ));
+    assert!(close(
+        &Trajectory::identity(TrajectoryKind::Bezier, 9)
+            .unwrap()
+            .eval(0.3),
+        &Se3::identity(),
+        1e-15
+    ));
+}
+
+#[test]
+fn bernstein_is_a_partition_of_unity() {
+    for u in [0.0, 0.2, 0.5, 0.9, 1.0] {
+        let b = bernstein(8, u);
+        assert_eq!(b.len(), 9);
+        assert!((b.iter().sum::<f64>() - 1.0).abs() < 1e-14);
+    }
+    // C(8,3) (1−u)^5 u^3 at u = 0.5.
+    assert!((bernstein(8, 0.5)[3] - 56.0 / 256.0).abs() < 1e-15);
+}
+
+#[test]
+fn bezier_is_the_ordered_product() {
+    // Δ(u) = Exp(b0 ξ0)·Exp(b1 ξ1)·Exp(b2 ξ2), in that order (not reversed).
+    let k = knots(3, 0.6);
+    let t = Trajectory::new(TrajectoryKind::Bezier, k.clone()).unwrap();
+    let u: f64 = 0.3;
+    let b = [(1.0 - u).powi(2), 2.0 * u * (1.0 - u), u * u];
+    let e = |j: usize| Se3::exp(&(Vector6::from(k[j]) * b[j]));
+    assert!(close(&t.eval(u), &(e(0) * e(1) * e(2)), 1e-12));
+    assert!(!close(&t.eval(u), &(e(2) * e(1) * e(0)), 1e-4));
+}
+
+#[test]
+fn knot_jacobians_match_finite_differences() {
+    let h = 1e-6;
+    for kind in all_kinds() {
+        for scale in [1e-5, 0.05, 0.4] {
+            let k = knots(kind.default_knots(), scale);
+            let t = Trajectory::new(kind, k.clone()).unwrap();
+            for u in [0.0, 0.21, 0.5, 0.93, 1.0] {
+                let (pose, jacs) = t.eval_with_jacobians(u);
+                assert!(close(&pose, &t.eval(u), 1e-14));
+                for (j, jac) in jacs.iter().enumerate() {
+                    for c in 0..6 {
+                        let shifted = |d: f64| {
+                            let mut kk = k.clone();
+                            kk[j][c] += d;
+                            let p = Trajectory::new(kind, kk).unwrap().eval(u);
+                            (pose.inverse() * p).log()
+                        };
+                        let fd = (shifted(h) - shifted(-h)) / (2.0 * h);
+                        for r in 0..6 {
+                            let err = (fd[r] - jac[r][c]).abs();
+                            assert!(
+                                err < 1e-7,
+                                "{kind:?} scale {scale} u {u} knot {j} [{r}][{c}]: fd {} vs {}",
+                                fd[r],
+                                jac[r][c]
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A smooth test loss of a world-to-camera pose: squared distances of transformed points to
+/// targets, with its Euclidean gradients dL/dR and dL/dt.
+fn loss_and_grads(w2c: &Se3) -> (f64, [[f64; 3]; 3], [f64; 3]) {
+    let pts = [[0.3, -1.0, 2.0], [1.5, 0.2, -0.7], [-0.4, 0.9, 1.1]];
+    let tgt = [[0.1, 0.2, 3.0], [-0.5, 1.0, 0.4], [0.0, -0.3, 2.2]];
+    let mut l = 0.0;
+    let mut gr = [[0.0; 3]; 3];
+    let mut gt = [0.0; 3];
+    for (p, q) in pts.iter().zip(&tgt) {
+        let e = w2c.act(&Vector3::from(*p)) - Vector3::from(*q);
+        l += e.norm_squared();
+        for i in 0..3 {
+            gt[i] += 2.0 * e[i];
+            for (jj, pj) in p.iter().enumerate() {
+                gr[i][jj] += 2.0 * e[i] * pj;
+            }
+        }
+    }
+    (l, gr, gt)
+}
+
+#[test]
+fn pose_gradient_bridge_matches_finite_differences() {
+    let w2c = Se3::exp(&Vector6::from([0.4, -0.2, 1.0, 0.3, -0.6, 0.2]));
+    let (_, gr, gt) = loss_and_grads(&w2c);
+    let left = w2c_left_perturbation_gradient(&w2c, &gr, &gt);
+    let right = c2w_right_perturbation_gradient(&w2c, &gr, &gt);
+    let h = 1e-6;
+    for c in 0..6 {
+        let mut e = Vector6::zeros();
+        e[c] = h;
+        let fd_left = (loss_and_grads(&(Se3::exp(&e) * w2c)).0
+            - loss_and_grads(&(Se3::exp(&-e) * w2c)).0)
+            / (2.0 * h);
+        let c2w = w2c.inverse();
+        let via_c2w = |d: &Vector6<f64>| loss_and_grads(&(c2w * Se3::exp(d)).inverse()).0;
+        let fd_right = (via_c2w(&e) - via_c2w(&-e)) / (2.0 * h);
+        assert!(
+            (fd_left - left[c]).abs() < 1e-6,
+            "left [{c}]: {fd_left} vs {}",
+            left[c]
+        );
+        assert!(
+            (fd_right - right[c]).abs() < 1e-6,
+            "right [{c}]: {fd_right} vs {}",
+            right[c]
+        );
+    }
+}
+
+#[test]
+fn render_gradient_to_knot_gradient_chain() {
+    // The trainer's chain: w2c(u) = (c2w_init · Δ(u))⁻¹, renderer gives dL/dR, dL/dt, and
+    // dL/dξ_j comes from c2w_right_perturbation_gradient + accumulate_knot_gradients.
+    let c2w_init = Se3::exp(&Vector6::from([1.0, 0.5, -2.0, 0.1, 0.7, -0.3]));
+    let u = 0.37;
+    for kind in all_kinds() {
+        let k = knots(kind.default_knots(), 0.1);
+        let t = Trajectory::new(kind, k.clone()).unwrap();
+        let w2c = (c2w_init * t.eval(u)).inverse();
+        let (_, gr, gt) = loss_and_grads(&w2c);
+        let g = c2w_right_perturbation_gradient(&w2c, &gr, &gt);
+        let mut grads = vec![[0.0; 6]; k.len()];
+        t.accumulate_knot_gradients(u, &g, &mut grads);
+        let h = 1e-6;
+        for j in 0..k.len() {
+            for c in 0..6 {
+                let l = |d: f64| {
+                    let mut kk = k.clone();
+                    kk[j][c] += d;
+                    let tt = Trajectory::new(kind, kk).unwrap();
+                    loss_and_grads(&(c2w_init * tt.eval(u)).inverse()).0
+                };
+                let fd = (l(h) - l(-h)) / (2.0 * h);
+                assert!(
+                    (fd - grads[j][c]).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "{kind:?} knot {j} c {c}: {fd} vs {}",
+                    grads[j][c]
+                );
+            }
+        }
+    }
+}
