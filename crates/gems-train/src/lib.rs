@@ -1,2 +1,45 @@
 //! GeMS training: per-image exposure trajectories, the physical blur model, losses, Adam and
 //! 3DGS-MCMC densification, jointly optimised.
+//!
+//! Modules:
+//! * [`config`] — [`TrainConfig`]: every constant of the method (TOML, defaults = paper/PRISM3D).
+//! * [`adam`] — torch-semantics Adam on flat SoA parameter groups.
+//! * [`mcmc`] — gsplat `MCMCStrategy`: relocation, growth, SGLD noise.
+//! * [`normalize`] — PRISM3D scene normalisation (orient up, centre, scale) and its inverse.
+//! * [`init`] — Gaussians from SfM points (3-NN scales) or random points in the camera frustums.
+pub mod adam;
+pub mod config;
+pub mod init;
+pub mod mcmc;
+pub mod normalize;
+
+pub use config::{TrainConfig, TrajectoryKind};
+
+use std::path::{Path, PathBuf};
+
+/// Errors of training, checkpointing and output I/O.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error("I/O error on {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("invalid configuration: {0}")]
+    Config(String),
+    #[error("invalid input: {0}")]
+    Input(String),
+    #[error("file {path}: {reason}")]
+    Format { path: PathBuf, reason: String },
+    #[error(transparent)]
+    Splat(#[from] gems_splat::SplatError),
+}
+
+impl TrainError {
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        TrainError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}
