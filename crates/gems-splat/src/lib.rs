@@ -1,5 +1,334 @@
-//! Differentiable 3D Gaussian splatting on the CPU.
+//! Differentiable 3D Gaussian splatting on the CPU, with gradients for every camera pose.
 //!
-//! Scene types (structure of arrays), pinhole cameras (OpenCV, world-to-camera), a batched
-//! forward renderer and its backward pass including gradients for each camera pose, a slow f64
-//! reference renderer that the fast path is tested against, and Inria-layout PLY.
+//! The semantics are those of gsplat 1.5 (classic or antialiased rasterisation, pinhole camera):
+//! EWA projection with eps2d 0.3, near 0.01 / far 1e10, the 0.3·tan_fov Jacobian guard band,
+//! per-axis radius `ceil(3.33·σ)`, 16×16 tiles with per-tile depth-sorted lists,
+//! `α = min(0.999, o·exp(−σ))`, skip `α < 1/255`, stop before a Gaussian that would bring the
+//! transmittance to ≤ 1e-4, colour `max(SH(mean − camera centre) + 0.5, 0)`, background `T·bg`.
+//!
+//! API overview:
+//! * [`Gaussians`] — the scene, structure of arrays (means, wxyz quats, log-scales, opacity
+//!   logits, 16 SH coefficients per channel and an active degree).
+//! * [`Camera`] — pinhole intrinsics and an OpenCV world-to-camera pose
+//!   (`x_cam = rotation · x_world + translation`).
+//! * [`Renderer`] — the fast f32 tile renderer: [`Renderer::forward`] renders C cameras of one
+//!   scene in one call (all of one size) and remembers what [`Renderer::backward`] needs;
+//!   `backward` turns `dL/dRGB` (and optionally `dL/dalpha`) into [`Gradients`] for every
+//!   Gaussian parameter, every background and every camera's rotation and translation, plus
+//!   densification statistics. Buffers are reused across calls.
+//! * [`reference`] — a slow, dense, f64 renderer with the same semantics; the fast path and
+//!   the gsplat test vectors are checked against it and it is checked by finite differences.
+//! * [`ply`] — Inria-layout PLY read/write (opens in common splat viewers).
+//!
+//! Per-(camera, Gaussian) projection, SH colour and their backward are computed in f64 by one
+//! shared implementation (`project`); it is cheap next to the per-pixel work, which is f32 in the
+//! fast path and f64 in the reference. Results do not depend on the number of rayon threads:
+//! every parallel reduction is over fixed chunks summed in a fixed order.
+
+// Small fixed-size matrix and channel loops read best with explicit indices.
+#![allow(clippy::needless_range_loop)]
+
+mod project;
+mod raster;
+pub mod reference;
+mod sh;
+
+pub use raster::Renderer;
+
+/// Number of SH coefficients per colour channel stored per Gaussian (degree 3).
+pub const SH_COEFFS: usize = 16;
+
+/// Errors of the splatting engine.
+#[derive(Debug, thiserror::Error)]
+pub enum SplatError {
+    /// The scene's arrays disagree in length or the SH degree is out of range.
+    #[error("invalid Gaussians: {0}")]
+    InvalidGaussians(String),
+    /// A camera has non-finite or non-positive intrinsics, an empty image or a non-finite pose.
+    #[error("invalid camera {index}: {reason}")]
+    InvalidCamera { index: usize, reason: String },
+    /// Cameras, backgrounds and gradient buffers do not fit together.
+    #[error("shape mismatch: {0}")]
+    Shape(String),
+    /// `backward` was called without a matching `forward`.
+    #[error("backward called without a matching forward: {0}")]
+    NoForward(String),
+    /// Reading or writing a PLY file failed.
+    #[error("PLY file {path}: {reason}")]
+    Ply {
+        path: std::path::PathBuf,
+        reason: String,
+    },
+}
+
+/// Structure-of-arrays Gaussians. quats wxyz, not necessarily normalised.
+///
+/// Gaussians with non-finite parameters or a (near-)zero quaternion are culled by the renderer
+/// (they draw nothing and get zero gradients) rather than rejected.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Gaussians {
+    pub means: Vec<[f32; 3]>,
+    pub quats: Vec<[f32; 4]>,
+    pub log_scales: Vec<[f32; 3]>,
+    pub opacity_logits: Vec<f32>,
+    /// SH coefficients `[coefficient][channel]`; those above `sh_degree` are ignored.
+    pub sh: Vec<[[f32; 3]; SH_COEFFS]>,
+    /// Active SH degree, 0..=3.
+    pub sh_degree: u32,
+}
+
+impl Gaussians {
+    /// Number of Gaussians.
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+
+    /// Checks that all arrays have the same length and the SH degree is at most 3.
+    pub fn validate(&self) -> Result<(), SplatError> {
+        let n = self.means.len();
+        let lens = [
+            ("quats", self.quats.len()),
+            ("log_scales", self.log_scales.len()),
+            ("opacity_logits", self.opacity_logits.len()),
+            ("sh", self.sh.len()),
+        ];
+        for (name, len) in lens {
+            if len != n {
+                return Err(SplatError::InvalidGaussians(format!(
+                    "{name} has {len} entries but means has {n}"
+                )));
+            }
+        }
+        if self.sh_degree > 3 {
+            return Err(SplatError::InvalidGaussians(format!(
+                "sh_degree {} is above 3",
+                self.sh_degree
+            )));
+        }
+        Ok(())
+    }
+
+    /// Appends one Gaussian.
+    pub fn push(
+        &mut self,
+        mean: [f32; 3],
+        quat: [f32; 4],
+        log_scale: [f32; 3],
+        opacity_logit: f32,
+        sh: [[f32; 3]; SH_COEFFS],
+    ) {
+        self.means.push(mean);
+        self.quats.push(quat);
+        self.log_scales.push(log_scale);
+        self.opacity_logits.push(opacity_logit);
+        self.sh.push(sh);
+    }
+
+    /// An empty scene with the given SH degree.
+    pub fn with_degree(sh_degree: u32) -> Self {
+        Gaussians {
+            sh_degree,
+            ..Default::default()
+        }
+    }
+}
+
+/// Pinhole camera, world-to-camera in OpenCV convention: x_cam = rotation * x_world + translation (row-major rotation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+    pub width: u32,
+    pub height: u32,
+    pub rotation: [[f32; 3]; 3],
+    pub translation: [f32; 3],
+}
+
+impl Camera {
+    /// Camera centre in world coordinates, `−Rᵀ t`.
+    pub fn center(&self) -> [f32; 3] {
+        let r = &self.rotation;
+        let t = &self.translation;
+        let mut c = [0.0f32; 3];
+        for (i, ci) in c.iter_mut().enumerate() {
+            *ci = -(r[0][i] * t[0] + r[1][i] * t[1] + r[2][i] * t[2]);
+        }
+        c
+    }
+
+    /// A camera at `position` looking at `target`, with image "up" (−y in OpenCV) as close to
+    /// `up` as possible. Returns `None` when the view direction is degenerate.
+    #[allow(clippy::too_many_arguments)]
+    pub fn look_at(
+        fx: f32,
+        fy: f32,
+        cx: f32,
+        cy: f32,
+        width: u32,
+        height: u32,
+        position: [f32; 3],
+        target: [f32; 3],
+        up: [f32; 3],
+    ) -> Option<Camera> {
+        let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        let cross = |a: [f32; 3], b: [f32; 3]| {
+            [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ]
+        };
+        let normalize = |a: [f32; 3]| {
+            let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+            (n > 1e-12 && n.is_finite()).then(|| [a[0] / n, a[1] / n, a[2] / n])
+        };
+        let z = normalize(sub(target, position))?;
+        // OpenCV: y points down, so x = y × z with y = −up projected.
+        let x = normalize(cross(z, up).map(|v| -v))?;
+        let y = cross(z, x);
+        let rotation = [x, y, z];
+        let mut translation = [0.0f32; 3];
+        for (i, ti) in translation.iter_mut().enumerate() {
+            *ti = -(rotation[i][0] * position[0]
+                + rotation[i][1] * position[1]
+                + rotation[i][2] * position[2]);
+        }
+        Some(Camera {
+            fx,
+            fy,
+            cx,
+            cy,
+            width,
+            height,
+            rotation,
+            translation,
+        })
+    }
+
+    pub(crate) fn check(&self, index: usize) -> Result<(), SplatError> {
+        let bad = |reason: &str| SplatError::InvalidCamera {
+            index,
+            reason: reason.to_string(),
+        };
+        let intr = [self.fx, self.fy, self.cx, self.cy];
+        if !intr.iter().all(|v| v.is_finite()) || self.fx <= 0.0 || self.fy <= 0.0 {
+            return Err(bad("fx, fy must be finite and positive, cx, cy finite"));
+        }
+        if self.width == 0 || self.height == 0 {
+            return Err(bad("image size must be positive"));
+        }
+        if !self.rotation.iter().flatten().all(|v| v.is_finite())
+            || !self.translation.iter().all(|v| v.is_finite())
+        {
+            return Err(bad("pose must be finite"));
+        }
+        Ok(())
+    }
+}
+
+/// Rasterisation settings; `Default` gives gsplat 1.5's defaults (classic mode, no depth).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Mip-Splatting opacity compensation `sqrt(det Σ2D / det(Σ2D + eps2d·I))`.
+    pub antialiased: bool,
+    /// Also output expected depth `Σ w·z / Σ w` (0 where nothing is drawn); forward only.
+    pub compute_depth: bool,
+    /// Low-pass filter added to the 2D covariance diagonal.
+    pub eps2d: f32,
+    pub near_plane: f32,
+    pub far_plane: f32,
+    /// Opacity clamp.
+    pub alpha_max: f32,
+    /// Gaussians with smaller α at a pixel are skipped there.
+    pub alpha_min: f32,
+    /// A pixel stops before the Gaussian that would bring T to at most this.
+    pub transmittance_min: f32,
+    /// Radius of the screen-space box in standard deviations (per axis, rounded up).
+    pub radius_extent: f32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            antialiased: false,
+            compute_depth: false,
+            eps2d: 0.3,
+            near_plane: 0.01,
+            far_plane: 1e10,
+            alpha_max: 0.999,
+            alpha_min: 1.0 / 255.0,
+            transmittance_min: 1e-4,
+            radius_extent: 3.33,
+        }
+    }
+}
+
+/// Rendered images of C cameras.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderOutput {
+    pub width: u32,
+    pub height: u32,
+    pub num_cameras: usize,
+    /// `[C,H,W,3]`, background included.
+    pub rgb: Vec<f32>,
+    /// `[C,H,W]`, `1 − T`.
+    pub alpha: Vec<f32>,
+    /// `[C,H,W]` expected depth when requested.
+    pub depth: Option<Vec<f32>>,
+    /// `[C,N,2]` per-axis screen radius in pixels; 0 means culled for that camera.
+    pub radii: Vec<[i32; 2]>,
+}
+
+/// Gradients of a scalar loss, from [`Renderer::backward`] or [`reference::backward`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Gradients {
+    pub means: Vec<[f32; 3]>,
+    /// W.r.t. the raw (unnormalised) quaternion.
+    pub quats: Vec<[f32; 4]>,
+    pub log_scales: Vec<[f32; 3]>,
+    pub opacity_logits: Vec<f32>,
+    pub sh: Vec<[[f32; 3]; SH_COEFFS]>,
+    /// Per camera.
+    pub backgrounds: Vec<[f32; 3]>,
+    /// Euclidean dL/dR per camera.
+    pub cam_rotation: Vec<[[f32; 3]; 3]>,
+    pub cam_translation: Vec<[f32; 3]>,
+    /// Per Gaussian, summed over cameras: `|dL/d mean2d|` (pixel units) of each camera.
+    pub mean2d_grad_norm: Vec<f32>,
+    /// Per Gaussian: the number of cameras in which it was not culled (radius > 0).
+    pub visible_count: Vec<u32>,
+}
+
+pub(crate) fn check_inputs(
+    g: &Gaussians,
+    cams: &[Camera],
+    backgrounds: &[[f32; 3]],
+) -> Result<(u32, u32), SplatError> {
+    g.validate()?;
+    let first = cams
+        .first()
+        .ok_or_else(|| SplatError::Shape("at least one camera is needed".into()))?;
+    for (i, c) in cams.iter().enumerate() {
+        c.check(i)?;
+        if c.width != first.width || c.height != first.height {
+            return Err(SplatError::Shape(format!(
+                "camera {i} is {}x{} but camera 0 is {}x{}; all cameras of a call share one size",
+                c.width, c.height, first.width, first.height
+            )));
+        }
+    }
+    if backgrounds.len() != cams.len() {
+        return Err(SplatError::Shape(format!(
+            "{} backgrounds for {} cameras",
+            backgrounds.len(),
+            cams.len()
+        )));
+    }
+    Ok((first.width, first.height))
+}
