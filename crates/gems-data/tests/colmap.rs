@@ -1,0 +1,335 @@
+//! COLMAP reader/writer tests: byte-exact binary round trip, text round trip, hand-made files,
+//! malformed inputs and "arbitrary bytes never panic".
+
+use gems_data::DataError;
+use gems_data::colmap::*;
+use proptest::prelude::*;
+
+fn sample_model() -> SparseModel {
+    SparseModel {
+        cameras: vec![
+            Camera {
+                id: 3,
+                model: CameraModel::Pinhole,
+                width: 400,
+                height: 270,
+                params: vec![350.5, 351.25, 200.0, 135.0],
+            },
+            Camera {
+                id: 0,
+                model: CameraModel::Opencv,
+                width: 800,
+                height: 540,
+                params: vec![700.0, 701.0, 400.0, 270.0, 0.01, -0.002, 1e-4, -2e-5],
+            },
+        ],
+        images: vec![
+            Image {
+                id: 0,
+                qvec: [0.9, 0.1, -0.2, 0.3],
+                tvec: [1.0, -2.0, 0.1234567890123],
+                camera_id: 3,
+                name: "img 000.png".into(),
+                points2d: vec![
+                    Point2D {
+                        x: 10.5,
+                        y: 20.25,
+                        point3d_id: 7,
+                    },
+                    Point2D {
+                        x: 1.0 / 3.0,
+                        y: 2.0,
+                        point3d_id: INVALID_POINT3D_ID,
+                    },
+                ],
+            },
+            Image {
+                id: 5,
+                qvec: [1.0, 0.0, 0.0, 0.0],
+                tvec: [0.0, 0.0, 0.0],
+                camera_id: 0,
+                name: "b.jpg".into(),
+                points2d: vec![],
+            },
+        ],
+        points: vec![
+            Point3D {
+                id: 7,
+                xyz: [0.1, 0.2, 3.0],
+                rgb: [255, 0, 17],
+                error: 0.75,
+                track: vec![(0, 0)],
+            },
+            Point3D {
+                id: 9,
+                xyz: [-1e-9, 2e10, 5.5],
+                rgb: [1, 2, 3],
+                error: -1.0,
+                track: vec![],
+            },
+        ],
+    }
+}
+
+#[test]
+fn binary_round_trip_is_byte_exact() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = sample_model();
+    write_model(dir.path(), &m, ModelFormat::Binary).unwrap();
+    let back = read_model(dir.path()).unwrap();
+    assert_eq!(back, m);
+    for f in ["cameras.bin", "images.bin", "points3D.bin"] {
+        let a = std::fs::read(dir.path().join(f)).unwrap();
+        let d2 = tempfile::tempdir().unwrap();
+        write_model(d2.path(), &back, ModelFormat::Binary).unwrap();
+        assert_eq!(a, std::fs::read(d2.path().join(f)).unwrap(), "{f}");
+    }
+}
+
+#[test]
+fn text_round_trip_preserves_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = sample_model();
+    write_model(dir.path(), &m, ModelFormat::Text).unwrap();
+    assert_eq!(detect_format(dir.path()), Some(ModelFormat::Text));
+    let back = read_model(dir.path()).unwrap();
+    assert_eq!(back, m);
+}
+
+/// A binary file assembled field by field from the documented layout (not with our writer).
+#[test]
+fn hand_made_binary_cameras_parse() {
+    let mut b = Vec::new();
+    b.extend_from_slice(&1u64.to_le_bytes());
+    b.extend_from_slice(&42u32.to_le_bytes());
+    b.extend_from_slice(&0i32.to_le_bytes()); // SIMPLE_PINHOLE
+    b.extend_from_slice(&640u64.to_le_bytes());
+    b.extend_from_slice(&480u64.to_le_bytes());
+    for p in [500.0f64, 320.0, 240.0] {
+        b.extend_from_slice(&p.to_le_bytes());
+    }
+    let cams = parse_cameras_bin(&b).unwrap();
+    assert_eq!(cams.len(), 1);
+    assert_eq!(cams[0].id, 42);
+    assert_eq!(cams[0].model, CameraModel::SimplePinhole);
+    let k = cams[0].intrinsics().unwrap();
+    assert_eq!(
+        (k.fx, k.fy, k.cx, k.cy, k.width, k.height),
+        (500.0, 500.0, 320.0, 240.0, 640, 480)
+    );
+}
+
+#[test]
+fn hand_made_text_model_parses() {
+    let cams = parse_cameras_txt(
+        "# Camera list with one line of data per camera:\n\
+         #   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n\
+         # Number of cameras: 2\n\
+         1 SIMPLE_RADIAL 100 80 90 50 40 0\n\
+         2 RADIAL 100 80 90 50 40 0.1 0\n",
+    )
+    .unwrap();
+    assert_eq!(cams.len(), 2);
+    assert_eq!(cams[0].intrinsics().unwrap().fx, 90.0);
+    let err = cams[1].intrinsics().unwrap_err();
+    assert!(err.contains("distortion"), "{err}");
+    let imgs = parse_images_txt(
+        "# header\n\
+         1 1 0 0 0 0.5 0 0 1 my image.png\n\
+         \n\
+         2 0.7071067811865476 0 0.7071067811865476 0 1 2 3 1 b.png\n\
+         1.5 2.5 -1 3 4 10\n",
+    )
+    .unwrap();
+    assert_eq!(imgs.len(), 2);
+    assert_eq!(imgs[0].name, "my image.png");
+    assert!(imgs[0].points2d.is_empty());
+    assert_eq!(imgs[1].points2d[0].point3d_id, INVALID_POINT3D_ID);
+    assert_eq!(imgs[1].points2d[1].point3d_id, 10);
+    // 90° about y: camera x axis (first row of R) maps world z to camera x.
+    let p = imgs[1].pose();
+    let cam = p.transform_point([0.0, 0.0, 1.0]);
+    assert!(
+        (cam[0] - 2.0).abs() < 1e-12
+            && (cam[1] - 2.0).abs() < 1e-12
+            && (cam[2] - 3.0).abs() < 1e-12
+    );
+    let pts = parse_points3d_txt("# c\n7 1 2 3 255 128 0 0.5 1 0 2 1\n").unwrap();
+    assert_eq!(pts[0].track, vec![(1, 0), (2, 1)]);
+    assert_eq!(pts[0].rgb, [255, 128, 0]);
+}
+
+fn write_files(dir: &std::path::Path, files: &[(&str, &[u8])]) {
+    for (n, b) in files {
+        std::fs::write(dir.join(n), b).unwrap();
+    }
+}
+
+fn assert_names(err: DataError, file: &str, needle: &str) {
+    let msg = err.to_string();
+    assert!(msg.contains(file), "error {msg:?} should name {file}");
+    assert!(
+        msg.contains(needle),
+        "error {msg:?} should mention {needle:?}"
+    );
+}
+
+#[test]
+fn truncated_binary_names_the_file() {
+    let m = sample_model();
+    let dir = tempfile::tempdir().unwrap();
+    write_model(dir.path(), &m, ModelFormat::Binary).unwrap();
+    let full = images_to_bin(&m.images);
+    for cut in [0, 7, 8, 20, full.len() - 1] {
+        std::fs::write(dir.path().join("images.bin"), &full[..cut]).unwrap();
+        assert_names(
+            read_model(dir.path()).unwrap_err(),
+            "images.bin",
+            "truncated",
+        );
+    }
+}
+
+#[test]
+fn malformed_models_give_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = sample_model();
+    write_model(dir.path(), &m, ModelFormat::Text).unwrap();
+    // Unknown camera model.
+    write_files(
+        dir.path(),
+        &[("cameras.txt", b"3 WEIRD 1 1 1\n0 PINHOLE 1 1 1 1 1 1\n")],
+    );
+    assert_names(
+        read_model(dir.path()).unwrap_err(),
+        "cameras.txt",
+        "unknown camera model",
+    );
+    // Wrong parameter count.
+    write_files(dir.path(), &[("cameras.txt", b"3 PINHOLE 1 1 1 1 1\n")]);
+    assert_names(
+        read_model(dir.path()).unwrap_err(),
+        "cameras.txt",
+        "needs 4 parameters",
+    );
+    // Image referring to a missing camera.
+    write_files(
+        dir.path(),
+        &[("cameras.txt", b"3 PINHOLE 400 270 1 1 1 1\n")],
+    );
+    assert_names(
+        read_model(dir.path()).unwrap_err(),
+        "images.txt",
+        "camera 0",
+    );
+    // NaN pose.
+    write_files(
+        dir.path(),
+        &[
+            ("cameras.txt", b"3 PINHOLE 400 270 1 1 1 1\n".as_slice()),
+            ("images.txt", b"1 nan 0 0 0 0 0 0 3 a.png\n\n"),
+            ("points3D.txt", b""),
+        ],
+    );
+    assert_names(
+        read_model(dir.path()).unwrap_err(),
+        "images.txt",
+        "invalid pose",
+    );
+    // Missing points2D line.
+    write_files(dir.path(), &[("images.txt", b"1 1 0 0 0 0 0 0 3 a.png")]);
+    assert_names(
+        read_model(dir.path()).unwrap_err(),
+        "images.txt",
+        "POINTS2D",
+    );
+    // Track pointing at a non-existent image.
+    write_files(
+        dir.path(),
+        &[
+            ("images.txt", b"1 1 0 0 0 0 0 0 3 a.png\n\n".as_slice()),
+            ("points3D.txt", b"1 0 0 0 1 1 1 0 99 0\n"),
+        ],
+    );
+    assert_names(
+        read_model(dir.path()).unwrap_err(),
+        "points3D.txt",
+        "image 99",
+    );
+    // Missing file.
+    std::fs::remove_file(dir.path().join("points3D.txt")).unwrap();
+    assert_names(
+        read_model(dir.path()).unwrap_err(),
+        "points3D.txt",
+        "missing",
+    );
+    // Unknown binary model id.
+    let d2 = tempfile::tempdir().unwrap();
+    write_model(d2.path(), &m, ModelFormat::Binary).unwrap();
+    let mut cams = cameras_to_bin(&m.cameras);
+    cams[12..16].copy_from_slice(&77i32.to_le_bytes());
+    std::fs::write(d2.path().join("cameras.bin"), cams).unwrap();
+    assert_names(
+        read_model(d2.path()).unwrap_err(),
+        "cameras.bin",
+        "unknown camera model id 77",
+    );
+}
+
+#[test]
+fn unsupported_models_are_explained() {
+    let cam = Camera {
+        id: 1,
+        model: CameraModel::OpencvFisheye,
+        width: 10,
+        height: 10,
+        params: vec![1.0; 8],
+    };
+    assert!(cam.intrinsics().unwrap_err().contains("OPENCV_FISHEYE"));
+    let cam = Camera {
+        model: CameraModel::Opencv,
+        params: vec![5.0, 6.0, 5.0, 5.0, 0.0, 0.0, 0.0, 0.0],
+        ..cam
+    };
+    let k = cam.intrinsics().unwrap();
+    assert_eq!((k.fx, k.fy), (5.0, 6.0));
+}
+
+#[test]
+fn model_names_and_ids_agree() {
+    for id in 0..11 {
+        let m = CameraModel::from_id(id).unwrap();
+        assert_eq!(m.id(), id);
+        assert_eq!(CameraModel::from_name(m.name()), Some(m));
+    }
+    assert_eq!(CameraModel::from_id(11), None);
+    assert_eq!(CameraModel::from_id(-1), None);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+    #[test]
+    fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
+        let _ = parse_cameras_bin(&bytes);
+        let _ = parse_images_bin(&bytes);
+        let _ = parse_points3d_bin(&bytes);
+        let text = String::from_utf8_lossy(&bytes);
+        let _ = parse_cameras_txt(&text);
+        let _ = parse_images_txt(&text);
+        let _ = parse_points3d_txt(&text);
+    }
+
+    /// Mutating valid files (bit flips, truncation) must also never panic.
+    #[test]
+    fn mutated_valid_files_never_panic(pos in 0usize..400, val in any::<u8>(), cut in 0usize..400) {
+        let m = sample_model();
+        for mut b in [cameras_to_bin(&m.cameras), images_to_bin(&m.images), points3d_to_bin(&m.points)] {
+            let p = pos % b.len();
+            b[p] = val;
+            b.truncate(cut.max(1).min(b.len()));
+            let _ = parse_cameras_bin(&b);
+            let _ = parse_images_bin(&b);
+            let _ = parse_points3d_bin(&b);
+        }
+    }
+}
