@@ -1,0 +1,505 @@
+//! Robust bundle adjustment: Levenberg–Marquardt on poses, points and (optionally) a shared focal
+//! length, with Huber-weighted reprojection residuals and a Schur complement over the points.
+//!
+//! The reduced camera system is dense (6 per free camera + 1 for the focal), which is small for
+//! the ≤ 100 views this initialiser is meant for. The sum over points is done in fixed-size
+//! chunks in parallel and reduced in chunk order, so the result does not depend on the number
+//! of threads.
+
+use super::geometry::Pose;
+use nalgebra::{DMatrix, DVector, Matrix2x3, Matrix3, Rotation3, SMatrix, Vector2, Vector3};
+use rayon::prelude::*;
+
+/// One image measurement of a point, in pixels of the working level.
+#[derive(Clone, Copy, Debug)]
+pub struct Observation {
+    pub cam: usize,
+    pub point: usize,
+    pub xy: Vector2<f64>,
+}
+
+/// Shared pinhole intrinsics with the principal point held fixed.
+#[derive(Clone, Copy, Debug)]
+pub struct Intrinsics {
+    pub f: f64,
+    pub cx: f64,
+    pub cy: f64,
+}
+
+impl Intrinsics {
+    #[inline]
+    pub fn project(&self, xc: &Vector3<f64>) -> Vector2<f64> {
+        Vector2::new(self.f * xc.x / xc.z + self.cx, self.f * xc.y / xc.z + self.cy)
+    }
+    /// Pixel to normalised image coordinates.
+    #[inline]
+    pub fn normalise(&self, p: &Vector2<f64>) -> Vector2<f64> {
+        Vector2::new((p.x - self.cx) / self.f, (p.y - self.cy) / self.f)
+    }
+}
+
+/// Settings for [`bundle_adjust`].
+#[derive(Clone, Copy, Debug)]
+pub struct BaOptions {
+    pub huber_px: f64,
+    pub max_iters: usize,
+    pub refine_focal: bool,
+}
+
+/// Outcome of [`bundle_adjust`]: robust cost before and after, iterations run.
+#[derive(Clone, Copy, Debug)]
+pub struct BaSummary {
+    pub initial_cost: f64,
+    pub final_cost: f64,
+    pub iterations: usize,
+}
+
+#[inline]
+fn huber_cost(r2: f64, d: f64) -> f64 {
+    let r = r2.sqrt();
+    if r <= d { 0.5 * r2 } else { d * (r - 0.5 * d) }
+}
+
+#[inline]
+fn huber_weight(r2: f64, d: f64) -> f64 {
+    let r = r2.sqrt();
+    if r <= d { 1.0 } else { d / r }
+}
+
+/// Robust cost of the whole problem; observations behind a camera cost as a large residual.
+pub fn total_cost(
+    poses: &[Pose],
+    points: &[Vector3<f64>],
+    obs: &[Observation],
+    k: &Intrinsics,
+    huber_px: f64,
+) -> f64 {
+    obs.iter()
+        .map(|o| {
+            let xc = poses[o.cam].transform(&points[o.point]);
+            if xc.z <= 1e-9 {
+                return huber_cost(1e6, huber_px);
+            }
+            huber_cost((k.project(&xc) - o.xy).norm_squared(), huber_px)
+        })
+        .sum()
+}
+
+/// Per-observation Jacobians and residual. Camera block columns: ω (3), v (3), f (1).
+struct Lin {
+    jc: SMatrix<f64, 2, 7>,
+    jp: Matrix2x3<f64>,
+    r: Vector2<f64>,
+    w: f64,
+}
+
+fn linearise(pose: &Pose, x: &Vector3<f64>, o: &Vector2<f64>, k: &Intrinsics, huber: f64) -> Option<Lin> {
+    let rx = pose.r * x;
+    let xc = rx + pose.t;
+    if xc.z <= 1e-9 {
+        return None;
+    }
+    let iz = 1.0 / xc.z;
+    let (xn, yn) = (xc.x * iz, xc.y * iz);
+    let r = Vector2::new(k.f * xn + k.cx - o.x, k.f * yn + k.cy - o.y);
+    let dpi = Matrix2x3::new(k.f * iz, 0.0, -k.f * xn * iz, 0.0, k.f * iz, -k.f * yn * iz);
+    let mut jc = SMatrix::<f64, 2, 7>::zeros();
+    jc.fixed_view_mut::<2, 3>(0, 0).copy_from(&(dpi * (-rx.cross_matrix())));
+    jc.fixed_view_mut::<2, 3>(0, 3).copy_from(&dpi);
+    jc[(0, 6)] = xn;
+    jc[(1, 6)] = yn;
+    let jp = dpi * pose.r.matrix();
+    Some(Lin {
+        jc,
+        jp,
+        r,
+        w: huber_weight(r.norm_squared(), huber),
+    })
+}
+
+/// Bundle-adjust `poses` (indexed by `Observation::cam`), `points` and `k.f` in place.
+/// Cameras with `fixed[c]` keep their pose (the gauge); cameras without observations are untouched.
+pub fn bundle_adjust(
+    poses: &mut [Pose],
+    fixed: &[bool],
+    points: &mut [Vector3<f64>],
+    obs: &[Observation],
+    k: &mut Intrinsics,
+    opts: &BaOptions,
+) -> BaSummary {
+    let ncam = poses.len();
+    // Parameter layout: free cameras with observations get 6 columns each, then the focal.
+    let mut cam_col = vec![usize::MAX; ncam];
+    let mut seen = vec![false; ncam];
+    for o in obs {
+        seen[o.cam] = true;
+    }
+    let mut n = 0;
+    for c in 0..ncam {
+        if seen[c] && !fixed[c] {
+            cam_col[c] = n;
+            n += 6;
+        }
+    }
+    let focal_col = if opts.refine_focal { Some(n) } else { None };
+    if opts.refine_focal {
+        n += 1;
+    }
+    // Observations grouped by point (CSR).
+    let npts = points.len();
+    let mut start = vec![0usize; npts + 1];
+    for o in obs {
+        start[o.point + 1] += 1;
+    }
+    for i in 0..npts {
+        start[i + 1] += start[i];
+    }
+    let mut order = vec![0usize; obs.len()];
+    let mut fill = start.clone();
+    for (i, o) in obs.iter().enumerate() {
+        order[fill[o.point]] = i;
+        fill[o.point] += 1;
+    }
+
+    let initial_cost = total_cost(poses, points, obs, k, opts.huber_px);
+    let mut cost = initial_cost;
+    let mut lambda = 1e-3;
+    let mut iterations = 0;
+    const CHUNK: usize = 256;
+
+    for _ in 0..opts.max_iters {
+        iterations += 1;
+        // Linearise once per outer iteration; retry damping without relinearising.
+        let lins: Vec<Option<Lin>> = obs
+            .par_iter()
+            .map(|o| linearise(&poses[o.cam], &points[o.point], &o.xy, k, opts.huber_px))
+            .collect();
+        // Columns of an observation's 7 camera-side parameters in the reduced system.
+        let cols = |o: &Observation| -> [Option<usize>; 7] {
+            let mut c = [None; 7];
+            if cam_col[o.cam] != usize::MAX {
+                for (i, ci) in c.iter_mut().take(6).enumerate() {
+                    *ci = Some(cam_col[o.cam] + i);
+                }
+            }
+            c[6] = focal_col;
+            c
+        };
+        let mut accepted = false;
+        for _attempt in 0..8 {
+            // Per-point 3×3 blocks with damping; Schur complement into S, b.
+            let chunks: Vec<(DMatrix<f64>, DVector<f64>, Vec<Option<Matrix3<f64>>>, Vec<Vector3<f64>>)> = (0
+                ..npts.div_ceil(CHUNK))
+                .into_par_iter()
+                .map(|ch| {
+                    let mut s = DMatrix::<f64>::zeros(n, n);
+                    let mut b = DVector::<f64>::zeros(n);
+                    let mut vinv = Vec::with_capacity(CHUNK);
+                    let mut gps = Vec::with_capacity(CHUNK);
+                    let mut wblocks: Vec<(usize, SMatrix<f64, 7, 3>)> = Vec::new();
+                    for p in ch * CHUNK..((ch + 1) * CHUNK).min(npts) {
+                        let mut v = Matrix3::<f64>::zeros();
+                        let mut gp = Vector3::<f64>::zeros();
+                        wblocks.clear();
+                        for &oi in &order[start[p]..start[p + 1]] {
+                            let Some(l) = &lins[oi] else { continue };
+                            let o = &obs[oi];
+                            v += l.jp.transpose() * l.jp * l.w;
+                            gp += l.jp.transpose() * l.r * l.w;
+                            let c = cols(o);
+                            let u = l.jc.transpose() * l.jc * l.w;
+                            let gc = l.jc.transpose() * l.r * l.w;
+                            for a in 0..7 {
+                                let Some(ca) = c[a] else { continue };
+                                b[ca] += gc[a];
+                                for bb in 0..7 {
+                                    if let Some(cb) = c[bb] {
+                                        s[(ca, cb)] += u[(a, bb)];
+                                    }
+                                }
+                            }
+                            wblocks.push((oi, l.jc.transpose() * l.jp * l.w));
+                        }
+                        for i in 0..3 {
+                            v[(i, i)] += lambda * (v[(i, i)] + 1e-9);
+                        }
+                        let vi = v.try_inverse();
+                        if let Some(vi) = vi {
+                            // S −= W V⁻¹ Wᵀ ; b −= W V⁻¹ g_p
+                            for (oa, wa) in &wblocks {
+                                let ca = cols(&obs[*oa]);
+                                let wv = wa * vi;
+                                let bv = wv * gp;
+                                for a in 0..7 {
+                                    if let Some(x) = ca[a] {
+                                        b[x] -= bv[a];
+                                    }
+                                }
+                                for (ob, wb) in &wblocks {
+                                    let cb = cols(&obs[*ob]);
+                                    let m = wv * wb.transpose();
+                                    for a in 0..7 {
+                                        let Some(x) = ca[a] else { continue };
+                                        for bb in 0..7 {
+                                            if let Some(y) = cb[bb] {
+                                                s[(x, y)] -= m[(a, bb)];
+                                            }
+                                        }
+                                    }
+                                }
+                            }
+                        }
+                        vinv.push(vi);
+                        gps.push(gp);
+                    }
+                    (s, b, vinv, gps)
+                })
+                .collect();
+            let mut s = DMatrix::<f64>::zeros(n, n);
+            let mut b = DVector::<f64>::zeros(n);
+            let mut vinv = Vec::with_capacity(npts);
+            let mut gps = Vec::with_capacity(npts);
+            for (cs, cb, cv, cg) in chunks {
+                s += cs;
+                b += cb;
+                vinv.extend(cv);
+                gps.extend(cg);
+            }
+            for i in 0..n {
+                s[(i, i)] += lambda * (s[(i, i)] + 1e-9);
+            }
+            let dc = if n > 0 {
+                match s.clone().cholesky() {
+                    Some(ch) => ch.solve(&(-&b)),
+                    None => {
+                        lambda *= 10.0;
+                        continue;
+                    }
+                }
+            } else {
+                DVector::zeros(0)
+            };
+            // Back-substitute the points: δp = V⁻¹(−g_p − Wᵀ δc).
+            let dps: Vec<Vector3<f64>> = (0..npts)
+                .into_par_iter()
+                .map(|p| {
+                    let Some(vi) = vinv[p] else { return Vector3::zeros() };
+                    let mut rhs = -gps[p];
+                    for &oi in &order[start[p]..start[p + 1]] {
+                        let Some(l) = &lins[oi] else { continue };
+                        let c = cols(&obs[oi]);
+                        let w = l.jc.transpose() * l.jp * l.w;
+                        for a in 0..7 {
+                            if let Some(x) = c[a] {
+                                rhs -= w.row(a).transpose() * dc[x];
+                            }
+                        }
+                    }
+                    vi * rhs
+                })
+                .collect();
+            let mut new_poses = poses.to_vec();
+            for (c, np) in new_poses.iter_mut().enumerate() {
+                let col = cam_col[c];
+                if col == usize::MAX {
+                    continue;
+                }
+                let w = Vector3::new(dc[col], dc[col + 1], dc[col + 2]);
+                np.r = Rotation3::new(w) * np.r;
+                np.t += Vector3::new(dc[col + 3], dc[col + 4], dc[col + 5]);
+            }
+            let new_points: Vec<Vector3<f64>> = points.iter().zip(&dps).map(|(x, d)| x + d).collect();
+            let mut new_k = *k;
+            if let Some(fc) = focal_col {
+                new_k.f += dc[fc];
+            }
+            let new_cost = if new_k.f > 0.0 {
+                total_cost(&new_poses, &new_points, obs, &new_k, opts.huber_px)
+            } else {
+                f64::INFINITY
+            };
+            if new_cost < cost {
+                let rel = (cost - new_cost) / cost.max(1e-300);
+                poses.copy_from_slice(&new_poses);
+                points.copy_from_slice(&new_points);
+                *k = new_k;
+                cost = new_cost;
+                lambda = (lambda / 3.0).max(1e-9);
+                accepted = true;
+                if rel < 1e-7 {
+                    return BaSummary {
+                        initial_cost,
+                        final_cost: cost,
+                        iterations,
+                    };
+                }
+                break;
+            }
+            lambda *= 4.0;
+        }
+        if !accepted {
+            break;
+        }
+    }
+    BaSummary {
+        initial_cost,
+        final_cost: cost,
+        iterations,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// A ring of cameras looking at a cloud; returns ground truth and noisy observations.
+    fn problem(seed: u64) -> (Vec<Pose>, Vec<Vector3<f64>>, Vec<Observation>, Intrinsics) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let k = Intrinsics {
+            f: 300.0,
+            cx: 160.0,
+            cy: 120.0,
+        };
+        let pts: Vec<Vector3<f64>> = (0..200)
+            .map(|_| {
+                Vector3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                )
+            })
+            .collect();
+        let poses: Vec<Pose> = (0..6)
+            .map(|i| {
+                let a = -0.4 + 0.16 * i as f64;
+                let r = Rotation3::new(Vector3::new(0.0, -a, 0.0));
+                let c = Vector3::new(6.0 * a.sin(), 0.2 * i as f64 - 0.5, -6.0 * a.cos());
+                Pose { r, t: -(r * c) }
+            })
+            .collect();
+        let mut obs = Vec::new();
+        for (ci, p) in poses.iter().enumerate() {
+            for (pi, x) in pts.iter().enumerate() {
+                let xy = k.project(&p.transform(x));
+                obs.push(Observation { cam: ci, point: pi, xy });
+            }
+        }
+        (poses, pts, obs, k)
+    }
+
+    #[test]
+    fn ba_converges_to_zero_cost_from_perturbed_start() {
+        let (gt_poses, gt_pts, obs, k) = problem(4);
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let mut poses = gt_poses.clone();
+        for p in poses.iter_mut().skip(1) {
+            p.r = Rotation3::new(Vector3::new(
+                rng.random_range(-0.02..0.02),
+                rng.random_range(-0.02..0.02),
+                rng.random_range(-0.02..0.02),
+            )) * p.r;
+            p.t += Vector3::new(rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1), 0.0);
+        }
+        // Fix two cameras so that the gauge (including scale) is pinned.
+        let mut fixed = vec![false; poses.len()];
+        fixed[0] = true;
+        fixed[5] = true;
+        poses[5] = gt_poses[5];
+        let mut pts: Vec<_> = gt_pts
+            .iter()
+            .map(|x| x + Vector3::new(rng.random_range(-0.05..0.05), 0.03, -0.02))
+            .collect();
+        let mut kk = k;
+        kk.f = 310.0;
+        let s = bundle_adjust(
+            &mut poses,
+            &fixed,
+            &mut pts,
+            &obs,
+            &mut kk,
+            &BaOptions {
+                huber_px: 2.0,
+                max_iters: 100,
+                refine_focal: true,
+            },
+        );
+        assert!(s.final_cost < 1e-10 * s.initial_cost.max(1.0), "{s:?}");
+        assert!((kk.f - 300.0).abs() < 1e-4, "focal {}", kk.f);
+        for (p, g) in poses.iter().zip(&gt_poses) {
+            assert!((p.r.inverse() * g.r).angle() < 1e-6);
+            assert!((p.centre() - g.centre()).norm() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn huber_limits_outlier_influence() {
+        let (gt_poses, gt_pts, mut obs, k) = problem(5);
+        for o in obs.iter_mut().step_by(23) {
+            o.xy += Vector2::new(40.0, -25.0);
+        }
+        let mut poses = gt_poses.clone();
+        let mut pts = gt_pts.clone();
+        let mut kk = k;
+        let mut fixed = vec![false; poses.len()];
+        fixed[0] = true;
+        fixed[5] = true;
+        bundle_adjust(
+            &mut poses,
+            &fixed,
+            &mut pts,
+            &obs,
+            &mut kk,
+            &BaOptions {
+                huber_px: 1.0,
+                max_iters: 50,
+                refine_focal: false,
+            },
+        );
+        for (p, g) in poses.iter().zip(&gt_poses) {
+            assert!((p.centre() - g.centre()).norm() < 0.05, "{}", (p.centre() - g.centre()).norm());
+        }
+    }
+
+    /// Central finite differences of the residual against the analytic Jacobian.
+    #[test]
+    fn jacobians_match_finite_differences() {
+        let pose = Pose {
+            r: Rotation3::new(Vector3::new(0.1, -0.2, 0.3)),
+            t: Vector3::new(0.2, -0.1, 4.0),
+        };
+        let x = Vector3::new(0.3, -0.4, 0.5);
+        let k = Intrinsics {
+            f: 250.0,
+            cx: 100.0,
+            cy: 80.0,
+        };
+        let o = Vector2::new(90.0, 70.0);
+        let l = linearise(&pose, &x, &o, &k, 1e9).unwrap();
+        let res = |p: &Pose, x: &Vector3<f64>, k: &Intrinsics| k.project(&p.transform(x)) - o;
+        let h = 1e-6;
+        for i in 0..7 {
+            let mut d = [0.0; 7];
+            d[i] = h;
+            let step = |s: f64| {
+                let mut p = pose;
+                p.r = Rotation3::new(Vector3::new(d[0], d[1], d[2]) * s) * p.r;
+                p.t += Vector3::new(d[3], d[4], d[5]) * s;
+                let mut kk = k;
+                kk.f += d[6] * s;
+                res(&p, &x, &kk)
+            };
+            let num = (step(1.0) - step(-1.0)) / (2.0 * h);
+            let an = l.jc.column(i);
+            assert!((num - an).norm() < 1e-5 * (1.0 + an.norm()), "col {i}: {num} vs {an}");
+        }
+        for i in 0..3 {
+            let mut e = Vector3::zeros();
+            e[i] = h;
+            let num = (res(&pose, &(x + e), &k) - res(&pose, &(x - e), &k)) / (2.0 * h);
+            let an = l.jp.column(i);
+            assert!((num - an).norm() < 1e-5 * (1.0 + an.norm()), "point col {i}");
+        }
+    }
+}

@@ -1,0 +1,399 @@
+//! Blur-robust features: a grey image reduced to the pyramid level where motion blur is a few
+//! pixels, Shi–Tomasi (minimum-eigenvalue) keypoints of the heavily smoothed image, and
+//! mean/contrast-normalised patch descriptors (NCC) sampled around each keypoint.
+//!
+//! Why this and not SIFT: 30–60 px of motion blur wipes out fine-scale extrema, but the coarse
+//! intensity layout survives. At a level where the blur is ~3–6 px, a smoothed patch of a blurred
+//! image still correlates with the same patch in a view blurred along another direction.
+
+use rayon::prelude::*;
+
+/// A single-channel f32 image, row-major.
+#[derive(Clone, Debug)]
+pub(crate) struct Gray {
+    pub w: usize,
+    pub h: usize,
+    pub data: Vec<f32>,
+}
+
+impl Gray {
+    pub fn from_rgb(img: &image::RgbImage) -> Gray {
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        let data = img
+            .as_raw()
+            .chunks_exact(3)
+            .map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0)
+            .collect();
+        Gray { w, h, data }
+    }
+
+    #[inline]
+    fn at(&self, x: usize, y: usize) -> f32 {
+        self.data[y * self.w + x]
+    }
+
+    /// Bilinear sample at continuous pixel coordinates (pixel centres at integer + 0.5),
+    /// clamped at the border.
+    #[inline]
+    pub fn sample(&self, x: f32, y: f32) -> f32 {
+        let fx = (x - 0.5).clamp(0.0, (self.w - 1) as f32);
+        let fy = (y - 0.5).clamp(0.0, (self.h - 1) as f32);
+        let x0 = fx.floor() as usize;
+        let y0 = fy.floor() as usize;
+        let x1 = (x0 + 1).min(self.w - 1);
+        let y1 = (y0 + 1).min(self.h - 1);
+        let ax = fx - x0 as f32;
+        let ay = fy - y0 as f32;
+        let top = self.at(x0, y0) * (1.0 - ax) + self.at(x1, y0) * ax;
+        let bot = self.at(x0, y1) * (1.0 - ax) + self.at(x1, y1) * ax;
+        top * (1.0 - ay) + bot * ay
+    }
+
+    /// Separable Gaussian blur with clamped borders.
+    pub fn gaussian(&self, sigma: f32) -> Gray {
+        if sigma <= 0.0 {
+            return self.clone();
+        }
+        let r = (3.0 * sigma).ceil() as isize;
+        let kernel: Vec<f32> = (-r..=r)
+            .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
+            .collect();
+        let norm: f32 = kernel.iter().sum();
+        let kernel: Vec<f32> = kernel.iter().map(|k| k / norm).collect();
+        let (w, h) = (self.w, self.h);
+        let mut tmp = vec![0.0f32; w * h];
+        tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            let src = &self.data[y * w..(y + 1) * w];
+            for (x, out) in row.iter_mut().enumerate() {
+                let mut acc = 0.0;
+                for (k, kv) in kernel.iter().enumerate() {
+                    let xi = (x as isize + k as isize - r).clamp(0, w as isize - 1) as usize;
+                    acc += kv * src[xi];
+                }
+                *out = acc;
+            }
+        });
+        let mut data = vec![0.0f32; w * h];
+        data.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for (k, kv) in kernel.iter().enumerate() {
+                let yi = (y as isize + k as isize - r).clamp(0, h as isize - 1) as usize;
+                let src = &tmp[yi * w..(yi + 1) * w];
+                for (o, s) in row.iter_mut().zip(src) {
+                    *o += kv * s;
+                }
+            }
+        });
+        Gray { w, h, data }
+    }
+
+    /// Anti-aliased resize by `scale` (< 1 shrinks): Gaussian pre-filter, then bilinear sampling.
+    /// The same factor applies to both axes (x_out = scale · x_in), so callers should pick
+    /// `scale` with `width · scale` integral (see [`exact_scale`]).
+    pub fn resized(&self, scale: f32) -> Gray {
+        if (scale - 1.0).abs() < 1e-6 {
+            return self.clone();
+        }
+        let src = if scale < 1.0 {
+            self.gaussian(0.4 / scale)
+        } else {
+            self.clone()
+        };
+        let w = ((self.w as f32 * scale).round() as usize).max(1);
+        let h = ((self.h as f32 * scale).round() as usize).max(1);
+        let inv = 1.0 / scale;
+        let mut data = vec![0.0f32; w * h];
+        data.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for (x, o) in row.iter_mut().enumerate() {
+                *o = src.sample((x as f32 + 0.5) * inv, (y as f32 + 0.5) * inv);
+            }
+        });
+        Gray { w, h, data }
+    }
+}
+
+/// The scale closest to `target` (≤ 1) that maps `width` to a whole number of pixels.
+pub(crate) fn exact_scale(width: u32, target: f64) -> f64 {
+    let t = target.min(1.0);
+    let w = (width as f64 * t).round().max(1.0);
+    w / width as f64
+}
+
+/// Keypoints and descriptors of one image at the working level. `desc` is structure-of-arrays:
+/// keypoint `k` owns `desc[k*DESC_LEN..(k+1)*DESC_LEN]`.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Features {
+    pub xy: Vec<[f32; 2]>,
+    pub desc: Vec<f32>,
+}
+
+/// Side of the square descriptor grid.
+pub(crate) const DESC_SIDE: usize = 9;
+pub(crate) const DESC_LEN: usize = DESC_SIDE * DESC_SIDE;
+
+/// Feature-extraction settings, in working-level pixels.
+#[derive(Clone, Debug)]
+pub(crate) struct FeatureParams {
+    pub max_features: usize,
+    /// Smoothing applied before detection and description.
+    pub smooth_sigma: f32,
+    /// Spacing of descriptor samples.
+    pub desc_step: f32,
+    /// Non-maximum suppression radius.
+    pub nms_radius: usize,
+}
+
+/// Detect Shi–Tomasi keypoints on `img` (already at the working level) and describe them.
+/// Keypoints are spread over a grid so that a bright region cannot take all of them.
+pub(crate) fn extract(img: &Gray, p: &FeatureParams) -> Features {
+    let s = img.gaussian(p.smooth_sigma);
+    let (w, h) = (s.w, s.h);
+    if w < 8 || h < 8 {
+        return Features::default();
+    }
+    // Structure tensor of the gradient, integrated with a Gaussian window.
+    let mut gxx = vec![0.0f32; w * h];
+    let mut gyy = vec![0.0f32; w * h];
+    let mut gxy = vec![0.0f32; w * h];
+    for y in 1..h - 1 {
+        for x in 1..w - 1 {
+            let dx = 0.5 * (s.at(x + 1, y) - s.at(x - 1, y));
+            let dy = 0.5 * (s.at(x, y + 1) - s.at(x, y - 1));
+            let i = y * w + x;
+            gxx[i] = dx * dx;
+            gyy[i] = dy * dy;
+            gxy[i] = dx * dy;
+        }
+    }
+    let win = 1.5f32.max(p.smooth_sigma);
+    let gxx = Gray { w, h, data: gxx }.gaussian(win);
+    let gyy = Gray { w, h, data: gyy }.gaussian(win);
+    let gxy = Gray { w, h, data: gxy }.gaussian(win);
+    let resp: Vec<f32> = (0..w * h)
+        .map(|i| {
+            let (a, b, c) = (gxx.data[i], gxy.data[i], gyy.data[i]);
+            0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt()
+        })
+        .collect();
+    let max_resp = resp.iter().cloned().fold(0.0f32, f32::max);
+    if max_resp <= 1e-12 {
+        return Features::default();
+    }
+    let thresh = max_resp * 1e-3;
+    let margin = ((DESC_SIDE / 2) as f32 * p.desc_step).ceil() as usize + 2;
+    if w <= 2 * margin || h <= 2 * margin {
+        return Features::default();
+    }
+    let r = p.nms_radius as isize;
+    let mut cands: Vec<(f32, usize, usize)> = Vec::new();
+    for y in margin..h - margin {
+        for x in margin..w - margin {
+            let v = resp[y * w + x];
+            if v < thresh {
+                continue;
+            }
+            let mut is_max = true;
+            'nms: for dy in -r..=r {
+                for dx in -r..=r {
+                    if dx == 0 && dy == 0 {
+                        continue;
+                    }
+                    let (xx, yy) = ((x as isize + dx) as usize, (y as isize + dy) as usize);
+                    let u = resp[yy * w + xx];
+                    // Ties broken by index so that plateaus give exactly one maximum.
+                    if u > v || (u == v && (yy * w + xx) < y * w + x) {
+                        is_max = false;
+                        break 'nms;
+                    }
+                }
+            }
+            if is_max {
+                cands.push((v, x, y));
+            }
+        }
+    }
+    // Grid bucketing: each of G×G cells keeps its strongest share, then the global best fill up.
+    const G: usize = 6;
+    let per_cell = (p.max_features / (G * G)).max(1);
+    cands.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.2.cmp(&b.2)).then(a.1.cmp(&b.1)));
+    let mut counts = [0usize; G * G];
+    let mut chosen = Vec::with_capacity(p.max_features);
+    let mut rest = Vec::new();
+    for c in cands {
+        let cell = (c.2 * G / h) * G + c.1 * G / w;
+        if counts[cell] < per_cell {
+            counts[cell] += 1;
+            chosen.push(c);
+        } else {
+            rest.push(c);
+        }
+    }
+    for c in rest {
+        if chosen.len() >= p.max_features {
+            break;
+        }
+        chosen.push(c);
+    }
+    chosen.truncate(p.max_features);
+
+    let mut feats = Features {
+        xy: Vec::with_capacity(chosen.len()),
+        desc: Vec::with_capacity(chosen.len() * DESC_LEN),
+    };
+    let mut patch = [0.0f32; DESC_LEN];
+    for &(_, x, y) in &chosen {
+        // Sub-pixel peak by a quadratic fit through the response neighbourhood.
+        let i = y * w + x;
+        let sub = |m: f32, c: f32, pl: f32| {
+            let d = m - 2.0 * c + pl;
+            if d.abs() > 1e-12 {
+                (0.5 * (m - pl) / d).clamp(-0.5, 0.5)
+            } else {
+                0.0
+            }
+        };
+        let ox = sub(resp[i - 1], resp[i], resp[i + 1]);
+        let oy = sub(resp[i - w], resp[i], resp[i + w]);
+        let (cx, cy) = (x as f32 + 0.5 + ox, y as f32 + 0.5 + oy);
+        if describe(&s, cx, cy, p.desc_step, &mut patch) {
+            feats.xy.push([cx, cy]);
+            feats.desc.extend_from_slice(&patch);
+        }
+    }
+    feats
+}
+
+/// Zero-mean, unit-norm patch around (cx, cy). Returns false for a flat patch.
+fn describe(s: &Gray, cx: f32, cy: f32, step: f32, out: &mut [f32; DESC_LEN]) -> bool {
+    let half = (DESC_SIDE / 2) as f32;
+    for j in 0..DESC_SIDE {
+        for i in 0..DESC_SIDE {
+            out[j * DESC_SIDE + i] =
+                s.sample(cx + (i as f32 - half) * step, cy + (j as f32 - half) * step);
+        }
+    }
+    let mean = out.iter().sum::<f32>() / DESC_LEN as f32;
+    let mut norm = 0.0;
+    for v in out.iter_mut() {
+        *v -= mean;
+        norm += *v * *v;
+    }
+    if norm < 1e-10 {
+        return false;
+    }
+    let inv = 1.0 / norm.sqrt();
+    out.iter_mut().for_each(|v| *v *= inv);
+    true
+}
+
+/// Mutual-nearest-neighbour matches with Lowe's ratio test on descriptor distance and a minimum
+/// normalised cross-correlation. Returns (index in `a`, index in `b`).
+pub(crate) fn match_pair(a: &Features, b: &Features, ratio: f32, min_ncc: f32) -> Vec<(u32, u32)> {
+    let na = a.xy.len();
+    let nb = b.xy.len();
+    if na < 2 || nb < 2 {
+        return Vec::new();
+    }
+    // best[i] = (best j, best dot, second dot) for each row of a; column maxima for b.
+    let mut best_a = vec![(u32::MAX, -2.0f32, -2.0f32); na];
+    let mut best_b = vec![(u32::MAX, -2.0f32); nb];
+    for (i, da) in a.desc.chunks_exact(DESC_LEN).enumerate() {
+        for (j, db) in b.desc.chunks_exact(DESC_LEN).enumerate() {
+            let d: f32 = da.iter().zip(db).map(|(x, y)| x * y).sum();
+            let ba = &mut best_a[i];
+            if d > ba.1 {
+                ba.2 = ba.1;
+                ba.1 = d;
+                ba.0 = j as u32;
+            } else if d > ba.2 {
+                ba.2 = d;
+            }
+            if d > best_b[j].1 {
+                best_b[j] = (i as u32, d);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for (i, &(j, d1, d2)) in best_a.iter().enumerate() {
+        if j == u32::MAX || d1 < min_ncc || best_b[j as usize].0 != i as u32 {
+            continue;
+        }
+        // Distances of unit vectors: |a-b|² = 2 − 2·dot.
+        let dist1 = (2.0 - 2.0 * d1).max(0.0).sqrt();
+        let dist2 = (2.0 - 2.0 * d2).max(0.0).sqrt();
+        if dist1 < ratio * dist2 {
+            out.push((i as u32, j));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn blobs(w: usize, h: usize, shift: f32) -> Gray {
+        let mut data = vec![0.0f32; w * h];
+        let centres = [(20.0, 18.0, 4.0), (50.0, 40.0, 6.0), (33.0, 52.0, 3.0), (60.0, 12.0, 5.0)];
+        for y in 0..h {
+            for x in 0..w {
+                let mut v = 0.2;
+                for &(cx, cy, s) in &centres {
+                    let dx = x as f32 + 0.5 - cx - shift;
+                    let dy = y as f32 + 0.5 - cy;
+                    v += (-(dx * dx + dy * dy) / (2.0 * s * s)).exp();
+                }
+                data[y * w + x] = v;
+            }
+        }
+        Gray { w, h, data }
+    }
+
+    #[test]
+    fn gaussian_preserves_mean_and_constant() {
+        let g = Gray {
+            w: 10,
+            h: 7,
+            data: vec![0.3; 70],
+        };
+        let b = g.gaussian(2.0);
+        assert!(b.data.iter().all(|v| (v - 0.3).abs() < 1e-5));
+    }
+
+    #[test]
+    fn shifted_image_matches_with_same_offset() {
+        let a = blobs(80, 64, 0.0);
+        let b = blobs(80, 64, 3.0);
+        let p = FeatureParams {
+            max_features: 100,
+            smooth_sigma: 1.0,
+            desc_step: 1.0,
+            nms_radius: 3,
+        };
+        let fa = extract(&a, &p);
+        let fb = extract(&b, &p);
+        assert!(fa.xy.len() >= 3, "{}", fa.xy.len());
+        let m = match_pair(&fa, &fb, 0.9, 0.5);
+        assert!(m.len() >= 3, "{} matches", m.len());
+        for (i, j) in m {
+            let (pa, pb) = (fa.xy[i as usize], fb.xy[j as usize]);
+            assert!((pb[0] - pa[0] - 3.0).abs() < 0.3, "{pa:?} {pb:?}");
+            assert!((pb[1] - pa[1]).abs() < 0.3, "{pa:?} {pb:?}");
+        }
+    }
+
+    #[test]
+    fn flat_image_has_no_features() {
+        let g = Gray {
+            w: 64,
+            h: 64,
+            data: vec![0.5; 64 * 64],
+        };
+        let p = FeatureParams {
+            max_features: 100,
+            smooth_sigma: 1.0,
+            desc_step: 1.0,
+            nms_radius: 3,
+        };
+        assert!(extract(&g, &p).xy.is_empty());
+    }
+}

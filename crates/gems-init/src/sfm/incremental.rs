@@ -1,0 +1,437 @@
+//! Incremental reconstruction at the working level: tracks from verified pair matches, the
+//! initial pair, PnP registration, triangulation and bundle adjustment.
+
+use super::ba::{self, BaOptions, Intrinsics, Observation};
+use super::features::Features;
+use super::geometry::{self, Pose};
+use super::{PairMatches, SfmOptions};
+use nalgebra::{Vector2, Vector3};
+
+/// One observation of a track: view, working-level pixel, and whether it is still trusted.
+#[derive(Clone, Debug)]
+pub(crate) struct TrackObs {
+    pub view: usize,
+    pub xy: Vector2<f64>,
+    pub active: bool,
+}
+
+#[derive(Clone, Debug)]
+pub(crate) struct Track {
+    pub obs: Vec<TrackObs>,
+    pub xyz: Option<Vector3<f64>>,
+}
+
+/// State of a reconstruction at the working level.
+#[derive(Clone, Debug)]
+pub(crate) struct Recon {
+    pub k: Intrinsics,
+    pub poses: Vec<Option<Pose>>,
+    pub tracks: Vec<Track>,
+}
+
+impl Recon {
+    pub fn registered(&self) -> usize {
+        self.poses.iter().filter(|p| p.is_some()).count()
+    }
+
+    /// Observations that take part in the model: active, of a registered view, on a point.
+    pub fn used_obs(&self) -> impl Iterator<Item = (&Track, &TrackObs)> {
+        self.tracks.iter().filter(|t| t.xyz.is_some()).flat_map(move |t| {
+            t.obs
+                .iter()
+                .filter(move |o| o.active && self.poses[o.view].is_some())
+                .map(move |o| (t, o))
+        })
+    }
+
+    /// Mean reprojection error (working-level px) over the used observations.
+    pub fn mean_error(&self) -> f64 {
+        let (mut s, mut n) = (0.0, 0usize);
+        for (t, o) in self.used_obs() {
+            if let (Some(x), Some(p)) = (t.xyz, self.poses[o.view]) {
+                s += (self.k.project(&p.transform(&x)) - o.xy).norm();
+                n += 1;
+            }
+        }
+        if n == 0 { f64::INFINITY } else { s / n as f64 }
+    }
+}
+
+/// Chain pairwise matches into tracks with a union–find over (view, feature) nodes. A track keeps
+/// at most one feature per view (the first met), so inconsistent chains cannot put two
+/// observations of one point in the same image.
+fn build_tracks(feats: &[Features], pairs: &[PairMatches]) -> Vec<Track> {
+    let mut offset = vec![0usize; feats.len() + 1];
+    for (i, f) in feats.iter().enumerate() {
+        offset[i + 1] = offset[i] + f.xy.len();
+    }
+    let total = offset[feats.len()];
+    let mut parent: Vec<usize> = (0..total).collect();
+    fn find(p: &mut [usize], mut x: usize) -> usize {
+        while p[x] != x {
+            p[x] = p[p[x]];
+            x = p[x];
+        }
+        x
+    }
+    for pm in pairs {
+        for &(a, b) in &pm.matches {
+            let ra = find(&mut parent, offset[pm.i] + a as usize);
+            let rb = find(&mut parent, offset[pm.j] + b as usize);
+            if ra != rb {
+                parent[ra.max(rb)] = ra.min(rb);
+            }
+        }
+    }
+    let mut root_track = vec![usize::MAX; total];
+    let mut tracks: Vec<Track> = Vec::new();
+    let mut linked = vec![false; total];
+    for pm in pairs {
+        for &(a, b) in &pm.matches {
+            linked[offset[pm.i] + a as usize] = true;
+            linked[offset[pm.j] + b as usize] = true;
+        }
+    }
+    for (v, f) in feats.iter().enumerate() {
+        for (k, xy) in f.xy.iter().enumerate() {
+            let node = offset[v] + k;
+            if !linked[node] {
+                continue;
+            }
+            let r = find(&mut parent, node);
+            if root_track[r] == usize::MAX {
+                root_track[r] = tracks.len();
+                tracks.push(Track {
+                    obs: Vec::new(),
+                    xyz: None,
+                });
+            }
+            let t = &mut tracks[root_track[r]];
+            if t.obs.iter().all(|o| o.view != v) {
+                t.obs.push(TrackObs {
+                    view: v,
+                    xy: Vector2::new(xy[0] as f64, xy[1] as f64),
+                    active: true,
+                });
+            }
+        }
+    }
+    tracks.retain(|t| t.obs.len() >= 2);
+    tracks
+}
+
+/// Triangulate a track from its active observations in registered views; drops the worst
+/// observation while the fit is inconsistent. Returns whether a point was set.
+fn triangulate_track(t: &mut Track, poses: &[Option<Pose>], k: &Intrinsics, opts: &SfmOptions) -> bool {
+    let mut use_: Vec<usize> = (0..t.obs.len())
+        .filter(|&i| t.obs[i].active && poses[t.obs[i].view].is_some())
+        .collect();
+    let min_angle = opts.min_tri_angle_deg.to_radians();
+    while use_.len() >= 2 {
+        let obs: Vec<(Pose, Vector2<f64>)> = use_
+            .iter()
+            .map(|&i| (poses[t.obs[i].view].expect("registered"), k.normalise(&t.obs[i].xy)))
+            .collect();
+        let Some(x) = geometry::triangulate(&obs) else {
+            return false;
+        };
+        // Worst observation by reprojection error (behind the camera counts as infinite).
+        let errs: Vec<f64> = use_
+            .iter()
+            .map(|&i| {
+                let c = poses[t.obs[i].view].expect("registered").transform(&x);
+                if c.z <= 0.0 {
+                    f64::INFINITY
+                } else {
+                    (k.project(&c) - t.obs[i].xy).norm()
+                }
+            })
+            .collect();
+        let (wi, we) = errs
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, e)| (i, *e))
+            .expect("non-empty");
+        if we > opts.max_reproj_px {
+            use_.remove(wi);
+            continue;
+        }
+        let centres: Vec<Vector3<f64>> = use_
+            .iter()
+            .map(|&i| poses[t.obs[i].view].expect("registered").centre())
+            .collect();
+        let mut max_angle: f64 = 0.0;
+        for a in 0..centres.len() {
+            for b in a + 1..centres.len() {
+                max_angle = max_angle.max(geometry::triangulation_angle(&centres[a], &centres[b], &x));
+            }
+        }
+        if max_angle < min_angle {
+            return false;
+        }
+        for (i, o) in t.obs.iter_mut().enumerate() {
+            if poses[o.view].is_some() && !use_.contains(&i) {
+                o.active = false;
+            }
+        }
+        t.xyz = Some(x);
+        return true;
+    }
+    false
+}
+
+/// Bundle-adjust all points and registered poses (the `fixed` view is the gauge).
+fn run_ba(r: &mut Recon, fixed_view: usize, refine_focal: bool, iters: usize, opts: &SfmOptions) {
+    let mut point_of_track = vec![usize::MAX; r.tracks.len()];
+    let mut points = Vec::new();
+    let mut obs = Vec::new();
+    for (ti, t) in r.tracks.iter().enumerate() {
+        let Some(x) = t.xyz else { continue };
+        point_of_track[ti] = points.len();
+        for o in &t.obs {
+            if o.active && r.poses[o.view].is_some() {
+                obs.push(Observation {
+                    cam: o.view,
+                    point: points.len(),
+                    xy: o.xy,
+                });
+            }
+        }
+        points.push(x);
+    }
+    if obs.is_empty() {
+        return;
+    }
+    let mut poses: Vec<Pose> = r.poses.iter().map(|p| p.unwrap_or(Pose::identity())).collect();
+    let fixed: Vec<bool> = (0..poses.len()).map(|v| v == fixed_view).collect();
+    ba::bundle_adjust(
+        &mut poses,
+        &fixed,
+        &mut points,
+        &obs,
+        &mut r.k,
+        &BaOptions {
+            huber_px: opts.max_reproj_px * 0.5,
+            max_iters: iters,
+            refine_focal,
+        },
+    );
+    for (v, p) in r.poses.iter_mut().enumerate() {
+        if p.is_some() {
+            *p = Some(poses[v]);
+        }
+    }
+    for (ti, t) in r.tracks.iter_mut().enumerate() {
+        if point_of_track[ti] != usize::MAX {
+            t.xyz = Some(points[point_of_track[ti]]);
+        }
+    }
+}
+
+/// Deactivate observations beyond the reprojection threshold; drop points left with < 2.
+fn filter_outliers(r: &mut Recon, opts: &SfmOptions) {
+    let k = r.k;
+    for t in r.tracks.iter_mut() {
+        let Some(x) = t.xyz else { continue };
+        let mut n = 0;
+        for o in t.obs.iter_mut() {
+            let Some(p) = r.poses[o.view] else { continue };
+            if !o.active {
+                continue;
+            }
+            let c = p.transform(&x);
+            if c.z <= 0.0 || (k.project(&c) - o.xy).norm() > opts.max_reproj_px {
+                o.active = false;
+            } else {
+                n += 1;
+            }
+        }
+        if n < 2 {
+            t.xyz = None;
+        }
+    }
+}
+
+fn triangulate_all(r: &mut Recon, opts: &SfmOptions) -> usize {
+    let k = r.k;
+    let mut added = 0;
+    for t in r.tracks.iter_mut() {
+        if t.xyz.is_none() && triangulate_track(t, &r.poses, &k, opts) {
+            added += 1;
+        }
+    }
+    added
+}
+
+/// The initial pair: the essential matrix with the most inliers that also has enough parallax.
+fn initial_pair(feats: &[Features], pairs: &[PairMatches], k: &Intrinsics, opts: &SfmOptions) -> Option<(usize, usize, Pose)> {
+    let mut order: Vec<&PairMatches> = pairs.iter().collect();
+    order.sort_by(|a, b| b.matches.len().cmp(&a.matches.len()).then((a.i, a.j).cmp(&(b.i, b.j))));
+    let mut best: Option<(f64, usize, usize, Pose)> = None;
+    let good_angle = (3.0f64).max(2.0 * opts.min_tri_angle_deg).to_radians();
+    for pm in order.iter().take(30) {
+        let x1: Vec<_> = pm
+            .matches
+            .iter()
+            .map(|&(a, _)| k.normalise(&to_v(feats[pm.i].xy[a as usize])))
+            .collect();
+        let x2: Vec<_> = pm
+            .matches
+            .iter()
+            .map(|&(_, b)| k.normalise(&to_v(feats[pm.j].xy[b as usize])))
+            .collect();
+        let seed = opts.seed.wrapping_add(0x1000 + (pm.i * 7919 + pm.j) as u64);
+        let Some((e, mask)) = geometry::ransac_epipolar(&x1, &x2, true, opts.max_reproj_px / k.f, 2000, seed) else {
+            continue;
+        };
+        let (a, b): (Vec<_>, Vec<_>) = (0..x1.len()).filter(|&i| mask[i]).map(|i| (x1[i], x2[i])).unzip();
+        let Some((rel, front)) = geometry::decompose_essential(&e, &a, &b) else {
+            continue;
+        };
+        let c2 = rel.centre();
+        let mut angles: Vec<f64> = a
+            .iter()
+            .zip(&b)
+            .zip(&front)
+            .filter(|(_, f)| **f)
+            .filter_map(|((p, q), _)| geometry::triangulate(&[(Pose::identity(), *p), (rel, *q)]))
+            .map(|x| geometry::triangulation_angle(&Vector3::zeros(), &c2, &x))
+            .collect();
+        if angles.len() < opts.min_pair_inliers {
+            continue;
+        }
+        angles.sort_by(|x, y| x.total_cmp(y));
+        let med = angles[angles.len() / 2];
+        if med < opts.min_tri_angle_deg.to_radians() {
+            continue;
+        }
+        let score = angles.len() as f64 * (med / good_angle).min(1.0);
+        if best.as_ref().is_none_or(|b| score > b.0) {
+            best = Some((score, pm.i, pm.j, rel));
+        }
+    }
+    best.map(|(_, i, j, p)| (i, j, p))
+}
+
+fn to_v(p: [f32; 2]) -> Vector2<f64> {
+    Vector2::new(p[0] as f64, p[1] as f64)
+}
+
+/// Full incremental reconstruction with intrinsics `k` (working level). `refine_focal` frees the
+/// focal in bundle adjustment once three views are registered. None when no initial pair exists.
+pub(crate) fn reconstruct(
+    feats: &[Features],
+    pairs: &[PairMatches],
+    k: Intrinsics,
+    refine_focal: bool,
+    opts: &SfmOptions,
+) -> Option<Recon> {
+    let nviews = feats.len();
+    let tracks = build_tracks(feats, pairs);
+    let (i0, j0, rel) = initial_pair(feats, pairs, &k, opts)?;
+    let mut r = Recon {
+        k,
+        poses: vec![None; nviews],
+        tracks,
+    };
+    r.poses[i0] = Some(Pose::identity());
+    r.poses[j0] = Some(rel);
+    triangulate_all(&mut r, opts);
+    run_ba(&mut r, i0, false, 30, opts);
+    filter_outliers(&mut r, opts);
+    if r.tracks.iter().filter(|t| t.xyz.is_some()).count() < opts.min_pair_inliers / 2 {
+        return None;
+    }
+    // view → (track, obs index) for quick 2D–3D lookup.
+    let mut view_obs: Vec<Vec<(usize, usize)>> = vec![Vec::new(); nviews];
+    for (ti, t) in r.tracks.iter().enumerate() {
+        for (oi, o) in t.obs.iter().enumerate() {
+            view_obs[o.view].push((ti, oi));
+        }
+    }
+    let mut tried: Vec<Option<usize>> = vec![None; nviews];
+    const MIN_CORR: usize = 10;
+    loop {
+        let mut cands: Vec<(usize, usize)> = (0..nviews)
+            .filter(|&v| r.poses[v].is_none())
+            .map(|v| {
+                let n = view_obs[v]
+                    .iter()
+                    .filter(|&&(ti, oi)| r.tracks[ti].xyz.is_some() && r.tracks[ti].obs[oi].active)
+                    .count();
+                (v, n)
+            })
+            .filter(|&(v, n)| n >= MIN_CORR && tried[v] != Some(n))
+            .collect();
+        cands.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+        let mut registered = None;
+        for &(v, n) in &cands {
+            tried[v] = Some(n);
+            let corr: Vec<(usize, usize)> = view_obs[v]
+                .iter()
+                .copied()
+                .filter(|&(ti, oi)| r.tracks[ti].xyz.is_some() && r.tracks[ti].obs[oi].active)
+                .collect();
+            let xw: Vec<Vector3<f64>> = corr.iter().map(|&(ti, _)| r.tracks[ti].xyz.expect("point")).collect();
+            let xn: Vec<Vector2<f64>> = corr.iter().map(|&(ti, oi)| r.k.normalise(&r.tracks[ti].obs[oi].xy)).collect();
+            let seed = opts.seed.wrapping_add(0x2000 + v as u64 * 131 + n as u64);
+            let Some((pose, mask)) = geometry::ransac_pnp(&xw, &xn, opts.max_reproj_px / r.k.f, 1000, seed) else {
+                continue;
+            };
+            let ninl = mask.iter().filter(|&&m| m).count();
+            if ninl < MIN_CORR || (ninl as f64) < 0.25 * n as f64 {
+                continue;
+            }
+            for (&(ti, oi), &m) in corr.iter().zip(&mask) {
+                if !m {
+                    r.tracks[ti].obs[oi].active = false;
+                }
+            }
+            r.poses[v] = Some(pose);
+            registered = Some(v);
+            break;
+        }
+        let Some(v) = registered else { break };
+        let added = triangulate_all(&mut r, opts);
+        let nreg = r.registered();
+        run_ba(&mut r, i0, refine_focal && nreg >= 3, 15, opts);
+        filter_outliers(&mut r, opts);
+        tracing::debug!(view = v, registered = nreg, new_points = added, "registered view");
+    }
+    triangulate_all(&mut r, opts);
+    run_ba(&mut r, i0, refine_focal, 50, opts);
+    filter_outliers(&mut r, opts);
+    triangulate_all(&mut r, opts);
+    run_ba(&mut r, i0, refine_focal, 30, opts);
+    filter_outliers(&mut r, opts);
+    Some(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tracks_keep_one_feature_per_view() {
+        let f = |n: usize| Features {
+            xy: (0..n).map(|i| [i as f32, 0.0]).collect(),
+            desc: vec![],
+        };
+        let feats = vec![f(3), f(3), f(3)];
+        let pairs = vec![
+            PairMatches { i: 0, j: 1, matches: vec![(0, 0), (1, 1)] },
+            PairMatches { i: 1, j: 2, matches: vec![(0, 0), (1, 2)] },
+            // Inconsistent: links feature 0 of view 0 to feature 2 of view 2 as well as 0.
+            PairMatches { i: 0, j: 2, matches: vec![(0, 2)] },
+        ];
+        let t = build_tracks(&feats, &pairs);
+        for tr in &t {
+            let mut views: Vec<_> = tr.obs.iter().map(|o| o.view).collect();
+            views.sort();
+            views.dedup();
+            assert_eq!(views.len(), tr.obs.len());
+        }
+        assert!(!t.is_empty());
+    }
+}

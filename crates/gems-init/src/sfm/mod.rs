@@ -1,0 +1,388 @@
+//! Built-in blur-robust structure from motion.
+//!
+//! Pipeline ([`run_sfm`]):
+//! 1. every image is reduced to a *working level* (long side [`SfmOptions::working_sizes`]) where
+//!    30–60 px of motion blur shrinks to a few pixels; Shi–Tomasi keypoints of the smoothed image
+//!    are described by normalised patches ([`features`]);
+//! 2. all pairs are matched (mutual nearest neighbour + ratio test) and verified with a
+//!    fundamental-matrix RANSAC; verified matches are chained into tracks (union–find);
+//! 3. the initial pair maximises inliers × parallax; its essential matrix gives the first two
+//!    poses; further views are added by RANSAC PnP, tracks are triangulated with angle,
+//!    depth and reprojection checks, and a robust (Huber) Levenberg–Marquardt bundle adjustment
+//!    with a Schur complement over points runs after each registration ([`ba`]);
+//! 4. the focal length is taken from [`SfmOptions::focal_px`] when known; otherwise every
+//!    candidate in [`SfmOptions::focal_candidates`] seeds a reconstruction with the focal free in
+//!    bundle adjustment, and the one registering most views with the lowest error wins. Each
+//!    working size is tried in turn until all views register.
+//!
+//! Every input view is either registered or listed in [`SfmStats::unregistered`]. Fewer than two
+//! registered views is an error ([`SfmError::TooFewRegistered`]), as are degenerate inputs.
+//!
+//! [`write_outputs`] writes the COLMAP model (`sparse/0`, via `gems_data::colmap`), the
+//! `sfm_report.json` and a top-view PNG of cameras and points.
+
+pub mod ba;
+mod colmap_cli;
+pub mod features;
+pub mod geometry;
+mod incremental;
+mod output;
+
+pub use colmap_cli::{ColmapCliOptions, run_colmap_cli};
+pub use geometry::Pose;
+pub use output::{draw_top_view, to_colmap_model, write_outputs};
+
+use features::{FeatureParams, Features, Gray};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// One input image with the name it will carry in the COLMAP model.
+#[derive(Clone, Debug)]
+pub struct SfmImage {
+    pub name: String,
+    pub image: image::RgbImage,
+}
+
+/// Settings of [`run_sfm`].
+#[derive(Clone, Debug)]
+pub struct SfmOptions {
+    /// Focal length in full-resolution pixels when known (metadata); it is then held fixed.
+    pub focal_px: Option<f64>,
+    /// Candidate focal lengths as multiples of the long image side, used when `focal_px` is None.
+    pub focal_candidates: Vec<f64>,
+    /// Long side, in pixels, of the pyramid levels tried in order; the first that registers every
+    /// view is kept, otherwise the best over all.
+    pub working_sizes: Vec<u32>,
+    /// Keypoints per image at the working level.
+    pub max_features: usize,
+    /// Minimum verified matches for an image pair to count.
+    pub min_pair_inliers: usize,
+    /// Inlier threshold for RANSAC, PnP and track filtering, in working-level pixels.
+    pub max_reproj_px: f64,
+    /// Minimum triangulation angle of a new point, degrees.
+    pub min_tri_angle_deg: f64,
+    /// Seed of every random choice (RANSAC); same seed, same result.
+    pub seed: u64,
+}
+
+impl Default for SfmOptions {
+    fn default() -> Self {
+        SfmOptions {
+            focal_px: None,
+            focal_candidates: vec![0.7, 1.0, 1.5],
+            working_sizes: vec![192, 128, 288],
+            max_features: 500,
+            min_pair_inliers: 20,
+            max_reproj_px: 2.0,
+            min_tri_angle_deg: 1.0,
+            seed: 0,
+        }
+    }
+}
+
+/// Errors of the SfM stage.
+#[derive(Debug, thiserror::Error)]
+pub enum SfmError {
+    #[error("structure from motion needs at least 2 images, got {0}")]
+    TooFewImages(usize),
+    #[error("image {name} is {width}x{height}; structure from motion needs at least 32x32 pixels")]
+    ImageTooSmall { name: String, width: u32, height: u32 },
+    #[error("images must share one size: {first} is {w0}x{h0} but {name} is {w}x{h}")]
+    SizeMismatch {
+        first: String,
+        w0: u32,
+        h0: u32,
+        name: String,
+        w: u32,
+        h: u32,
+    },
+    #[error("images {0:?} have no texture (no keypoints at any pyramid level); fewer than two images are usable")]
+    Textureless(Vec<String>),
+    #[error("images {0} and {1} are identical; there is no parallax to reconstruct from")]
+    IdenticalImages(String, String),
+    #[error("invalid option: {0}")]
+    InvalidOption(String),
+    #[error(
+        "only {registered} of {total} views registered (need at least 2); unregistered: {unregistered:?}. \
+         The images may share too little overlap or parallax."
+    )]
+    TooFewRegistered {
+        registered: usize,
+        total: usize,
+        unregistered: Vec<String>,
+    },
+    #[error("failed to write {path}: {source}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    #[error("COLMAP subprocess: {0}")]
+    Colmap(String),
+    #[error("reading the COLMAP model: {0}")]
+    Data(#[from] gems_data::DataError),
+}
+
+/// Shared SIMPLE_PINHOLE camera in full-resolution pixels.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct SfmCamera {
+    pub width: u32,
+    pub height: u32,
+    pub focal: f64,
+    pub cx: f64,
+    pub cy: f64,
+}
+
+/// One input view: its pose when registered and its 2D observations (full-resolution pixels,
+/// index into [`SfmResult::points`]).
+#[derive(Clone, Debug)]
+pub struct SfmView {
+    pub name: String,
+    /// cam_from_world, or None when the view could not be registered.
+    pub pose: Option<Pose>,
+    pub observations: Vec<([f64; 2], usize)>,
+}
+
+/// A triangulated point with its colour, mean reprojection error (full-resolution px) and track
+/// as (view index, index into that view's observations).
+#[derive(Clone, Debug)]
+pub struct SfmPoint {
+    pub xyz: [f64; 3],
+    pub rgb: [u8; 3],
+    pub error: f64,
+    pub track: Vec<(usize, usize)>,
+}
+
+/// Diagnostics, serialised as `sfm_report.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct SfmStats {
+    pub registered: usize,
+    pub total: usize,
+    pub points: usize,
+    /// Mean reprojection error over all observations, full-resolution pixels.
+    pub mean_reprojection_error: f64,
+    pub mean_track_length: f64,
+    pub seconds: f64,
+    pub unregistered: Vec<String>,
+    /// Long side of the pyramid level the reconstruction was made at.
+    pub working_size: u32,
+    pub focal: f64,
+    pub focal_from_metadata: bool,
+    /// Seconds spent in feature extraction + matching, and in reconstruction.
+    pub seconds_features: f64,
+    pub seconds_reconstruction: f64,
+}
+
+/// The reconstruction: camera, views (in input order), points, diagnostics.
+#[derive(Clone, Debug)]
+pub struct SfmResult {
+    pub camera: SfmCamera,
+    pub views: Vec<SfmView>,
+    pub points: Vec<SfmPoint>,
+    pub stats: SfmStats,
+}
+
+/// Verified matches of one image pair at the working level.
+pub(crate) struct PairMatches {
+    pub i: usize,
+    pub j: usize,
+    pub matches: Vec<(u32, u32)>,
+}
+
+/// Validate the input and reconstruct. See the module docs for the pipeline.
+pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmError> {
+    let t0 = Instant::now();
+    validate(images, opts)?;
+    let (w, h) = images[0].image.dimensions();
+    let long = w.max(h) as f64;
+    let grays: Vec<Gray> = images.par_iter().map(|im| Gray::from_rgb(&im.image)).collect();
+    check_identical(images, &grays)?;
+
+    let mut best: Option<(incremental::Recon, u32, f64)> = None;
+    let mut t_feat = 0.0;
+    let mut t_rec = 0.0;
+    let mut textureless: Option<Vec<String>> = None;
+    for &ws in &opts.working_sizes {
+        let tf = Instant::now();
+        let scale = features::exact_scale(w, ws as f64 / long);
+        let (feats, pairs) = features_and_matches(images, &grays, scale as f32, opts);
+        t_feat += tf.elapsed().as_secs_f64();
+        if textureless.is_none() {
+            // A view with (almost) no keypoints at every level is textureless; it stays
+            // unregistered, and the run fails when fewer than two views have texture.
+            let names: Vec<String> = feats
+                .iter()
+                .enumerate()
+                .filter(|(k, f)| {
+                    f.xy.len() < 8
+                        && opts.working_sizes.iter().all(|&s| {
+                            let sc = features::exact_scale(w, s as f64 / long) as f32;
+                            extract_one(&grays[*k], sc, opts).xy.len() < 8
+                        })
+                })
+                .map(|(k, _)| images[k].name.clone())
+                .collect();
+            if images.len() - names.len() < 2 {
+                return Err(SfmError::Textureless(names));
+            }
+            if !names.is_empty() {
+                tracing::warn!(?names, "textureless views cannot be registered");
+            }
+            textureless = Some(names);
+        }
+        let tr = Instant::now();
+        let focals: Vec<(f64, bool)> = match opts.focal_px {
+            Some(f) => vec![(f * scale, false)],
+            None => opts
+                .focal_candidates
+                .iter()
+                .map(|c| (c * long * scale, true))
+                .collect(),
+        };
+        let (sw, sh) = (w as f64 * scale, h as f64 * scale);
+        for (f, refine) in focals {
+            let k = ba::Intrinsics {
+                f,
+                cx: 0.5 * sw,
+                cy: 0.5 * sh,
+            };
+            let rec = incremental::reconstruct(&feats, &pairs, k, refine, opts);
+            let Some(rec) = rec else { continue };
+            let nreg = rec.registered();
+            let err = rec.mean_error() / scale;
+            tracing::info!(working_size = ws, focal_start = f / scale, focal = rec.k.f / scale, registered = nreg, error_px = err, "sfm attempt");
+            let better = match &best {
+                None => true,
+                Some((b, _, bs)) => {
+                    let be = b.mean_error() / bs;
+                    nreg > b.registered() || (nreg == b.registered() && err < be)
+                }
+            };
+            if better {
+                best = Some((rec, ws, scale));
+            }
+        }
+        t_rec += tr.elapsed().as_secs_f64();
+        if best.as_ref().is_some_and(|b| b.0.registered() == images.len()) {
+            break;
+        }
+    }
+    let Some((rec, ws, scale)) = best else {
+        return Err(SfmError::TooFewRegistered {
+            registered: 0,
+            total: images.len(),
+            unregistered: images.iter().map(|i| i.name.clone()).collect(),
+        });
+    };
+    let mut result = output::assemble(images, &rec, scale, opts.focal_px.is_some(), ws);
+    result.stats.seconds = t0.elapsed().as_secs_f64();
+    result.stats.seconds_features = t_feat;
+    result.stats.seconds_reconstruction = t_rec;
+    if result.stats.registered < 2 {
+        return Err(SfmError::TooFewRegistered {
+            registered: result.stats.registered,
+            total: result.stats.total,
+            unregistered: result.stats.unregistered.clone(),
+        });
+    }
+    Ok(result)
+}
+
+fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
+    if images.len() < 2 {
+        return Err(SfmError::TooFewImages(images.len()));
+    }
+    if opts.working_sizes.is_empty() || opts.working_sizes.iter().any(|&s| s < 32) {
+        return Err(SfmError::InvalidOption("working sizes must be ≥ 32 px and non-empty".into()));
+    }
+    if opts.focal_px.is_none() && (opts.focal_candidates.is_empty() || opts.focal_candidates.iter().any(|c| !(*c > 0.0))) {
+        return Err(SfmError::InvalidOption("focal candidates must be positive and non-empty".into()));
+    }
+    if opts.focal_px.is_some_and(|f| !(f > 0.0 && f.is_finite())) {
+        return Err(SfmError::InvalidOption("focal_px must be positive".into()));
+    }
+    if opts.max_features < 16 || !(opts.max_reproj_px > 0.0) {
+        return Err(SfmError::InvalidOption("max_features ≥ 16 and max_reproj_px > 0 required".into()));
+    }
+    let (w0, h0) = images[0].image.dimensions();
+    for im in images {
+        let (w, h) = im.image.dimensions();
+        if w < 32 || h < 32 {
+            return Err(SfmError::ImageTooSmall {
+                name: im.name.clone(),
+                width: w,
+                height: h,
+            });
+        }
+        if (w, h) != (w0, h0) {
+            return Err(SfmError::SizeMismatch {
+                first: images[0].name.clone(),
+                w0,
+                h0,
+                name: im.name.clone(),
+                w,
+                h,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Identical (or near-identical) images carry no parallax. When *every* image equals the first,
+/// the reconstruction is impossible; report the pair.
+fn check_identical(images: &[SfmImage], grays: &[Gray]) -> Result<(), SfmError> {
+    let first = &grays[0].data;
+    let all_same = grays[1..].iter().all(|g| {
+        let mad = g.data.iter().zip(first).map(|(a, b)| (a - b).abs()).sum::<f32>() / first.len() as f32;
+        mad < 1e-4
+    });
+    if all_same {
+        return Err(SfmError::IdenticalImages(images[0].name.clone(), images[1].name.clone()));
+    }
+    Ok(())
+}
+
+fn feature_params(opts: &SfmOptions) -> FeatureParams {
+    FeatureParams {
+        max_features: opts.max_features,
+        smooth_sigma: 1.0,
+        desc_step: 1.5,
+        nms_radius: 3,
+    }
+}
+
+fn extract_one(g: &Gray, scale: f32, opts: &SfmOptions) -> Features {
+    features::extract(&g.resized(scale), &feature_params(opts))
+}
+
+/// Features of every view and fundamental-matrix-verified matches of every pair.
+fn features_and_matches(
+    images: &[SfmImage],
+    grays: &[Gray],
+    scale: f32,
+    opts: &SfmOptions,
+) -> (Vec<Features>, Vec<PairMatches>) {
+    let feats: Vec<Features> = grays.par_iter().map(|g| extract_one(g, scale, opts)).collect();
+    let n = images.len();
+    let pairs: Vec<(usize, usize)> = (0..n).flat_map(|i| (i + 1..n).map(move |j| (i, j))).collect();
+    let verified: Vec<PairMatches> = pairs
+        .par_iter()
+        .filter_map(|&(i, j)| {
+            let m = features::match_pair(&feats[i], &feats[j], 0.9, 0.6);
+            if m.len() < opts.min_pair_inliers {
+                return None;
+            }
+            let to_v = |p: [f32; 2]| nalgebra::Vector2::new(p[0] as f64, p[1] as f64);
+            let x1: Vec<_> = m.iter().map(|&(a, _)| to_v(feats[i].xy[a as usize])).collect();
+            let x2: Vec<_> = m.iter().map(|&(_, b)| to_v(feats[j].xy[b as usize])).collect();
+            let seed = opts.seed ^ ((i as u64) << 32 | j as u64);
+            let (_, mask) = geometry::ransac_epipolar(&x1, &x2, false, opts.max_reproj_px, 1000, seed)?;
+            let matches: Vec<(u32, u32)> = m.iter().zip(&mask).filter(|(_, k)| **k).map(|(m, _)| *m).collect();
+            (matches.len() >= opts.min_pair_inliers).then_some(PairMatches { i, j, matches })
+        })
+        .collect();
+    tracing::debug!(pairs = verified.len(), "verified image pairs");
+    (feats, verified)
+}

@@ -1,0 +1,246 @@
+//! From the working-level reconstruction to full-resolution results, and the files written for
+//! users: COLMAP `sparse/0`, `sfm_report.json` and `sfm_topview.png`.
+
+use super::incremental::Recon;
+use super::{SfmCamera, SfmError, SfmImage, SfmPoint, SfmResult, SfmStats, SfmView};
+use gems_data::colmap::{self, Camera, CameraModel, Image, ModelFormat, Point2D, Point3D, SparseModel};
+use nalgebra::{Vector2, Vector3};
+use std::path::Path;
+
+/// Bilinear RGB sample at continuous full-resolution coordinates.
+fn sample_rgb(img: &image::RgbImage, x: f64, y: f64) -> [f64; 3] {
+    let (w, h) = (img.width() as f64, img.height() as f64);
+    let fx = (x - 0.5).clamp(0.0, w - 1.0);
+    let fy = (y - 0.5).clamp(0.0, h - 1.0);
+    let (x0, y0) = (fx.floor() as u32, fy.floor() as u32);
+    let (x1, y1) = ((x0 + 1).min(img.width() - 1), (y0 + 1).min(img.height() - 1));
+    let (ax, ay) = (fx - x0 as f64, fy - y0 as f64);
+    let mut out = [0.0; 3];
+    for (c, o) in out.iter_mut().enumerate() {
+        let p = |x: u32, y: u32| img.get_pixel(x, y)[c] as f64;
+        *o = (p(x0, y0) * (1.0 - ax) + p(x1, y0) * ax) * (1.0 - ay) + (p(x0, y1) * (1.0 - ax) + p(x1, y1) * ax) * ay;
+    }
+    out
+}
+
+/// Scale the working-level reconstruction up to full resolution and collect the diagnostics.
+pub(crate) fn assemble(images: &[SfmImage], rec: &Recon, scale: f64, focal_from_metadata: bool, working_size: u32) -> SfmResult {
+    let (w, h) = images[0].image.dimensions();
+    let camera = SfmCamera {
+        width: w,
+        height: h,
+        focal: rec.k.f / scale,
+        cx: rec.k.cx / scale,
+        cy: rec.k.cy / scale,
+    };
+    let mut views: Vec<SfmView> = images
+        .iter()
+        .zip(&rec.poses)
+        .map(|(im, p)| SfmView {
+            name: im.name.clone(),
+            pose: *p,
+            observations: Vec::new(),
+        })
+        .collect();
+    let mut points = Vec::new();
+    let (mut err_sum, mut err_n) = (0.0, 0usize);
+    for t in &rec.tracks {
+        let Some(x) = t.xyz else { continue };
+        let used: Vec<_> = t.obs.iter().filter(|o| o.active && rec.poses[o.view].is_some()).collect();
+        if used.len() < 2 {
+            continue;
+        }
+        let pid = points.len();
+        let mut track = Vec::with_capacity(used.len());
+        let mut rgb = [0.0; 3];
+        let mut perr = 0.0;
+        for o in &used {
+            let full = o.xy / scale;
+            let pose = rec.poses[o.view].expect("registered");
+            let e = (rec.k.project(&pose.transform(&x)) - o.xy).norm() / scale;
+            perr += e;
+            let c = sample_rgb(&images[o.view].image, full.x, full.y);
+            for k in 0..3 {
+                rgb[k] += c[k];
+            }
+            track.push((o.view, views[o.view].observations.len()));
+            views[o.view].observations.push(([full.x, full.y], pid));
+        }
+        err_sum += perr;
+        err_n += used.len();
+        let n = used.len() as f64;
+        points.push(SfmPoint {
+            xyz: [x.x, x.y, x.z],
+            rgb: rgb.map(|c| (c / n).round().clamp(0.0, 255.0) as u8),
+            error: perr / n,
+            track,
+        });
+    }
+    let registered = views.iter().filter(|v| v.pose.is_some()).count();
+    let unregistered = views.iter().filter(|v| v.pose.is_none()).map(|v| v.name.clone()).collect();
+    let stats = SfmStats {
+        registered,
+        total: views.len(),
+        points: points.len(),
+        mean_reprojection_error: if err_n > 0 { err_sum / err_n as f64 } else { 0.0 },
+        mean_track_length: if points.is_empty() { 0.0 } else { err_n as f64 / points.len() as f64 },
+        seconds: 0.0,
+        unregistered,
+        working_size,
+        focal: camera.focal,
+        focal_from_metadata,
+        seconds_features: 0.0,
+        seconds_reconstruction: 0.0,
+    };
+    SfmResult {
+        camera,
+        views,
+        points,
+        stats,
+    }
+}
+
+/// The result as a COLMAP model: one SIMPLE_PINHOLE camera (id 1), registered images with id =
+/// input index + 1, points with ids from 1.
+pub fn to_colmap_model(r: &SfmResult) -> SparseModel {
+    let cameras = vec![Camera {
+        id: 1,
+        model: CameraModel::SimplePinhole,
+        width: r.camera.width as u64,
+        height: r.camera.height as u64,
+        params: vec![r.camera.focal, r.camera.cx, r.camera.cy],
+    }];
+    let images = r
+        .views
+        .iter()
+        .enumerate()
+        .filter_map(|(i, v)| {
+            let p = v.pose?;
+            let m = p.r.matrix();
+            let pose = gems_data::Pose {
+                rotation: [
+                    [m[(0, 0)], m[(0, 1)], m[(0, 2)]],
+                    [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
+                    [m[(2, 0)], m[(2, 1)], m[(2, 2)]],
+                ],
+                translation: [p.t.x, p.t.y, p.t.z],
+            };
+            let mut im = Image::from_pose(i as u32 + 1, 1, &v.name, &pose);
+            im.points2d = v
+                .observations
+                .iter()
+                .map(|&(xy, pid)| Point2D {
+                    x: xy[0],
+                    y: xy[1],
+                    point3d_id: pid as u64 + 1,
+                })
+                .collect();
+            Some(im)
+        })
+        .collect();
+    let points = r
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| Point3D {
+            id: i as u64 + 1,
+            xyz: p.xyz,
+            rgb: p.rgb,
+            error: p.error,
+            track: p.track.iter().map(|&(v, o)| (v as u32 + 1, o as u32)).collect(),
+        })
+        .collect();
+    SparseModel {
+        cameras,
+        images,
+        points,
+    }
+}
+
+/// Top view of cameras (red, with a viewing-direction tick) and points (their colour): the
+/// points and centres are projected onto the plane orthogonal to the cameras' mean "up" axis.
+pub fn draw_top_view(r: &SfmResult, size: u32) -> image::RgbImage {
+    let mut img = image::RgbImage::from_pixel(size, size, image::Rgb([255, 255, 255]));
+    let poses: Vec<_> = r.views.iter().filter_map(|v| v.pose).collect();
+    if poses.is_empty() {
+        return img;
+    }
+    // Up = mean of −y camera axes in the world; two in-plane axes from the mean viewing direction.
+    let mut up = Vector3::zeros();
+    let mut fwd = Vector3::zeros();
+    for p in &poses {
+        let rt = p.r.inverse();
+        up -= rt * Vector3::y();
+        fwd += rt * Vector3::z();
+    }
+    let up = up.try_normalize(1e-12).unwrap_or(Vector3::y());
+    let mut ax2 = fwd - up * fwd.dot(&up);
+    ax2 = ax2.try_normalize(1e-12).unwrap_or_else(|| up.cross(&Vector3::x()).normalize());
+    let ax1 = ax2.cross(&up);
+    let proj = |x: &Vector3<f64>| Vector2::new(x.dot(&ax1), -x.dot(&ax2));
+    let centres: Vec<Vector2<f64>> = poses.iter().map(|p| proj(&p.centre())).collect();
+    let pts: Vec<(Vector2<f64>, [u8; 3])> = r
+        .points
+        .iter()
+        .map(|p| (proj(&Vector3::new(p.xyz[0], p.xyz[1], p.xyz[2])), p.rgb))
+        .collect();
+    // Robust extent: 2nd–98th percentile of everything, so stray points do not shrink the plot.
+    let mut xs: Vec<f64> = centres.iter().chain(pts.iter().map(|p| &p.0)).map(|p| p.x).collect();
+    let mut ys: Vec<f64> = centres.iter().chain(pts.iter().map(|p| &p.0)).map(|p| p.y).collect();
+    xs.sort_by(|a, b| a.total_cmp(b));
+    ys.sort_by(|a, b| a.total_cmp(b));
+    let q = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
+    let (x0, x1, y0, y1) = (q(&xs, 0.02), q(&xs, 0.98), q(&ys, 0.02), q(&ys, 0.98));
+    let cx = 0.5 * (x0 + x1);
+    let cy = 0.5 * (y0 + y1);
+    let span = (x1 - x0).max(y1 - y0).max(1e-9) * 1.1;
+    let s = size as f64;
+    let to_px = |p: &Vector2<f64>| ((p.x - cx) / span * s + 0.5 * s, (p.y - cy) / span * s + 0.5 * s);
+    let put = |x: f64, y: f64, c: [u8; 3], img: &mut image::RgbImage| {
+        if x >= 0.0 && y >= 0.0 && x < s && y < s {
+            img.put_pixel(x as u32, y as u32, image::Rgb(c));
+        }
+    };
+    for (p, c) in &pts {
+        let (x, y) = to_px(p);
+        for (dx, dy) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
+            put(x + dx, y + dy, *c, &mut img);
+        }
+    }
+    for (p, c) in poses.iter().zip(&centres) {
+        let (x, y) = to_px(c);
+        let dir = proj(&(p.centre() + p.r.inverse() * Vector3::z())) - c;
+        let dir = dir.try_normalize(1e-12).unwrap_or(Vector2::zeros());
+        for k in 0..14 {
+            put(x + dir.x * k as f64, y + dir.y * k as f64, [0, 0, 200], &mut img);
+        }
+        for dy in -3..=3 {
+            for dx in -3..=3 {
+                put(x + dx as f64, y + dy as f64, [220, 0, 0], &mut img);
+            }
+        }
+    }
+    img
+}
+
+/// Write `out_dir/sparse/0` (COLMAP binary), `out_dir/sfm_report.json` and
+/// `out_dir/sfm_topview.png`. Every file is written atomically.
+pub fn write_outputs(r: &SfmResult, out_dir: &Path) -> Result<(), SfmError> {
+    let sparse = out_dir.join("sparse").join("0");
+    colmap::write_model(&sparse, &to_colmap_model(r), ModelFormat::Binary)?;
+    let json = serde_json::to_vec_pretty(&r.stats).map_err(|e| SfmError::Write {
+        path: out_dir.join("sfm_report.json"),
+        source: Box::new(e),
+    })?;
+    gems_data::write_atomic(&out_dir.join("sfm_report.json"), &json)?;
+    let png_path = out_dir.join("sfm_topview.png");
+    let img = draw_top_view(r, 800);
+    let mut bytes = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
+        .map_err(|e| SfmError::Write {
+            path: png_path.clone(),
+            source: Box::new(e),
+        })?;
+    gems_data::write_atomic(&png_path, &bytes)?;
+    Ok(())
+}

@@ -1,0 +1,155 @@
+//! End-to-end SfM on synthetic blurry captures with known poses, and degenerate inputs.
+
+mod common;
+
+use gems_init::sfm::{SfmError, SfmImage, SfmOptions, run_sfm, write_outputs};
+
+/// Level 1 (sharp) and level 7 (7 of 11 burst frames averaged; the full burst moves the image by
+/// 12 % of its width, so level 7 carries ≈ 7 % ≈ 17 px of blur at 240 px, the same fraction as
+/// 45 px at 640 px). Tolerance on the Sim(3)-aligned translation RMSE as a fraction of the camera
+/// path extent: 2 % sharp, 4 % at level 7.
+fn check_level(level: usize, tol: f64) {
+    let s = common::scene(12, 240, 180, level, 0.12, 42);
+    let r = run_sfm(&s.images, &SfmOptions::default()).expect("sfm");
+    let poses: Vec<_> = r.views.iter().map(|v| v.pose).collect();
+    eprintln!("level {level}: {:?}", r.stats);
+    assert_eq!(r.stats.registered, 12, "unregistered: {:?}", r.stats.unregistered);
+    let err = common::aligned_rmse_fraction(&poses, &s.gt);
+    eprintln!(
+        "level {level}: rmse/extent {err:.4}, focal {:.1} (gt {:.1}), points {}, reproj {:.2}px, {:.1}s",
+        r.camera.focal, s.focal, r.stats.points, r.stats.mean_reprojection_error, r.stats.seconds
+    );
+    assert!(err < tol, "level {level}: translation RMSE fraction {err} ≥ {tol}");
+    assert!((r.camera.focal / s.focal - 1.0).abs() < 0.15, "focal {} vs {}", r.camera.focal, s.focal);
+    assert!(r.stats.points >= 100);
+    assert!(r.stats.mean_reprojection_error < 3.0);
+}
+
+#[test]
+fn poses_align_to_ground_truth_sharp() {
+    check_level(1, 0.02);
+}
+
+#[test]
+fn poses_align_to_ground_truth_blur_level_7() {
+    check_level(7, 0.04);
+}
+
+#[test]
+fn known_focal_is_kept_and_outputs_are_written() {
+    let s = common::scene(6, 200, 150, 3, 0.12, 7);
+    let opts = SfmOptions {
+        focal_px: Some(s.focal),
+        ..SfmOptions::default()
+    };
+    let r = run_sfm(&s.images, &opts).expect("sfm");
+    assert_eq!(r.camera.focal, s.focal);
+    assert_eq!(r.stats.registered, 6);
+    let dir = tempfile::tempdir().unwrap();
+    write_outputs(&r, dir.path()).unwrap();
+    let model = gems_data::colmap::read_model(&dir.path().join("sparse/0")).unwrap();
+    assert_eq!(model.images.len(), 6);
+    assert_eq!(model.points.len(), r.points.len());
+    // Every point's track refers to real observations that point back at it.
+    for p in &model.points {
+        for &(img, idx) in &p.track {
+            let im = model.images.iter().find(|i| i.id == img).unwrap();
+            assert_eq!(im.points2d[idx as usize].point3d_id, p.id);
+        }
+    }
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("sfm_report.json")).unwrap()).unwrap();
+    for key in ["registered", "total", "points", "mean_reprojection_error", "seconds", "unregistered", "mean_track_length"] {
+        assert!(report.get(key).is_some(), "missing {key}");
+    }
+    assert_eq!(report["registered"], 6);
+    let png = image::open(dir.path().join("sfm_topview.png")).unwrap();
+    assert_eq!(png.width(), 800);
+}
+
+#[test]
+fn same_seed_same_result() {
+    let s = common::scene(5, 160, 120, 1, 0.12, 3);
+    let opts = SfmOptions {
+        working_sizes: vec![160],
+        ..SfmOptions::default()
+    };
+    let a = run_sfm(&s.images, &opts).unwrap();
+    let b = run_sfm(&s.images, &opts).unwrap();
+    assert_eq!(a.points.len(), b.points.len());
+    for (x, y) in a.views.iter().zip(&b.views) {
+        assert_eq!(x.pose, y.pose);
+    }
+}
+
+#[test]
+fn one_image_is_a_clear_error() {
+    let s = common::scene(2, 96, 72, 1, 0.1, 1);
+    let e = run_sfm(&s.images[..1], &SfmOptions::default()).unwrap_err();
+    assert!(matches!(e, SfmError::TooFewImages(1)), "{e}");
+}
+
+#[test]
+fn identical_images_are_a_clear_error() {
+    let s = common::scene(1, 96, 72, 1, 0.1, 1);
+    let imgs = vec![
+        s.images[0].clone(),
+        SfmImage {
+            name: "copy.png".into(),
+            image: s.images[0].image.clone(),
+        },
+        SfmImage {
+            name: "copy2.png".into(),
+            image: s.images[0].image.clone(),
+        },
+    ];
+    let e = run_sfm(&imgs, &SfmOptions::default()).unwrap_err();
+    assert!(matches!(e, SfmError::IdenticalImages(..)), "{e}");
+}
+
+#[test]
+fn textureless_images_are_a_clear_error() {
+    let flat = |n: &str, v: u8| SfmImage {
+        name: n.into(),
+        image: image::RgbImage::from_pixel(160, 120, image::Rgb([v, v, v])),
+    };
+    let e = run_sfm(&[flat("a.png", 100), flat("b.png", 101)], &SfmOptions::default()).unwrap_err();
+    match e {
+        SfmError::Textureless(names) => assert_eq!(names, vec!["a.png".to_string(), "b.png".to_string()]),
+        other => panic!("unexpected {other}"),
+    }
+    // One textureless view among textured ones is reported as unregistered, not an error.
+    let s = common::scene(5, 160, 120, 1, 0.12, 5);
+    let mut imgs = s.images.clone();
+    imgs.push(flat("flat.png", 128));
+    let r = run_sfm(&imgs, &SfmOptions::default()).unwrap();
+    assert!(r.stats.unregistered.contains(&"flat.png".to_string()));
+    assert_eq!(r.stats.registered + r.stats.unregistered.len(), r.stats.total);
+}
+
+#[test]
+fn unrelated_images_fail_with_too_few_registered() {
+    // Two different noise images share no structure.
+    let noise = |seed: u32| {
+        image::RgbImage::from_fn(128, 96, |x, y| {
+            let h = (x.wrapping_mul(73856093) ^ y.wrapping_mul(19349663) ^ seed.wrapping_mul(83492791)) % 251;
+            image::Rgb([h as u8, (h * 7 % 251) as u8, (h * 13 % 251) as u8])
+        })
+    };
+    let imgs = vec![
+        SfmImage { name: "n1.png".into(), image: noise(1) },
+        SfmImage { name: "n2.png".into(), image: noise(2) },
+    ];
+    let e = run_sfm(&imgs, &SfmOptions::default()).unwrap_err();
+    assert!(matches!(e, SfmError::TooFewRegistered { .. }), "{e}");
+}
+
+#[test]
+fn mismatched_sizes_are_a_clear_error() {
+    let imgs = vec![
+        SfmImage { name: "a.png".into(), image: image::RgbImage::new(64, 48) },
+        SfmImage { name: "b.png".into(), image: image::RgbImage::new(48, 64) },
+    ];
+    let e = run_sfm(&imgs, &SfmOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("b.png"), "{e}");
+}
