@@ -208,10 +208,10 @@ impl SsimWorkspace {
                     let mut sum = 0.0f64;
                     for c in 0..wi {
                         let mut m = [0.0f32; 5];
-                        for k in 0..WIN {
+                        for (k, gk) in g.iter().enumerate() {
                             let base = (r + k) * 5 * wi + c;
                             for (j, mv) in m.iter_mut().enumerate() {
-                                *mv += g[k] * horiz[base + j * wi];
+                                *mv += gk * horiz[base + j * wi];
                             }
                         }
                         let (mx, my) = (m[0], m[1]);
