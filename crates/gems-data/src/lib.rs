@@ -7,10 +7,12 @@
 pub mod colmap;
 pub mod error;
 mod fsutil;
+pub mod image;
 pub mod llff;
 mod npy;
 pub mod pose;
 
 pub use error::{DataError, FormatError, Result};
 pub use fsutil::write_atomic;
+pub use image::{ImageCache, ImageRgb, load_image, save_png};
 pub use pose::{Intrinsics, Pose};
