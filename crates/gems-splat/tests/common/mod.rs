@@ -166,3 +166,79 @@ pub fn split_viewmat_grad(vm: &[f64]) -> (Vec<f64>, Vec<f64>) {
     }
     (r, t)
 }
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// A random scene of `n` Gaussians in front of `nc` cameras of `w`×`h` that orbit the origin a
+/// little. `sh_scale` scales the higher SH coefficients; the DC term keeps colours positive.
+pub fn random_scene(
+    seed: u64,
+    n: usize,
+    nc: usize,
+    w: u32,
+    h: u32,
+    sh_degree: u32,
+    scale_range: (f32, f32),
+) -> (Gaussians, Vec<Camera>, Vec<[f32; 3]>) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut g = Gaussians::with_degree(sh_degree);
+    for _ in 0..n {
+        let mean = [
+            rng.random_range(-1.2f32..1.2),
+            rng.random_range(-0.8f32..0.8),
+            rng.random_range(-0.8f32..0.8),
+        ];
+        let quat = [0; 4].map(|_| rng.random_range(-1.0f32..1.0));
+        let ls = [0; 3].map(|_| rng.random_range(scale_range.0..scale_range.1));
+        let logit = rng.random_range(-2.0f32..2.5);
+        let mut sh = [[0.0f32; 3]; SH_COEFFS];
+        for (k, row) in sh.iter_mut().enumerate() {
+            for v in row.iter_mut() {
+                *v = if k == 0 {
+                    rng.random_range(0.2f32..1.5)
+                } else {
+                    rng.random_range(-0.15f32..0.15)
+                };
+            }
+        }
+        g.push(mean, quat, ls, logit, sh);
+    }
+    let cams = (0..nc)
+        .map(|c| {
+            let a = 0.15 * c as f32 + rng.random_range(-0.05f32..0.05);
+            let pos = [
+                4.0 * a.sin(),
+                rng.random_range(-0.2f32..0.2),
+                -4.0 * a.cos(),
+            ];
+            let f = w as f32 * 0.9;
+            Camera::look_at(
+                f,
+                f * 1.02,
+                w as f32 * 0.5 + 0.3,
+                h as f32 * 0.5 - 0.2,
+                w,
+                h,
+                pos,
+                [0.0, 0.0, 0.0],
+                [0.0, -1.0, 0.0],
+            )
+            .unwrap()
+        })
+        .collect();
+    let bgs = (0..nc)
+        .map(|_| [0; 3].map(|_| rng.random_range(0.0f32..1.0)))
+        .collect();
+    (g, cams, bgs)
+}
+
+/// Random loss weights in [−1, 1].
+pub fn random_weights(seed: u64, len: usize) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..len).map(|_| rng.random_range(-1.0f64..1.0)).collect()
+}
+
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
