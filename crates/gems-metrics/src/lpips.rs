@@ -16,7 +16,10 @@
 //!   (<https://download.pytorch.org/models/alexnet-owt-7be5be79.pth>).
 //!
 //! [`Lpips::load`] reads both directly (`Lpips::load(&["alex.pth", "alexnet-owt-7be5be79.pth"])`),
-//! or a single safetensors file. To convert once to safetensors (lpips state_dict layout):
+//! or a single safetensors file. Both PyTorch formats are read: the zip format (`torch.save`
+//! since PyTorch 1.6, via `candle_core::pickle`) and the older "legacy" stream format (magic
+//! number, protocol, sys_info, the pickled state_dict, storage keys, raw storages), which older
+//! checkpoints still use; the latter is parsed here with candle's pickle machine. To convert once to safetensors (lpips state_dict layout):
 //! ```python
 //! import lpips, safetensors.torch as st
 //! m = lpips.LPIPS(net="alex", version="0.1")
@@ -29,6 +32,9 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+use std::io::{BufRead, BufReader, Read};
+
+use candle_core::pickle::{Object, Stack};
 use candle_core::{D, DType, Device, Tensor};
 
 use crate::{MetricsError, check_pair};
@@ -102,7 +108,7 @@ impl Lpips {
                 tensors
                     .extend(candle_core::safetensors::load(path, &Device::Cpu).map_err(read_err)?);
             } else {
-                tensors.extend(candle_core::pickle::read_all(path).map_err(read_err)?);
+                tensors.extend(read_pth(path).map_err(read_err)?);
             }
         }
         let files = paths
@@ -199,4 +205,205 @@ impl Lpips {
         }
         Ok(total)
     }
+}
+
+/// The first pickle of a legacy-format PyTorch file: protocol 2, LONG1 of 10 bytes holding the
+/// magic number 0x1950a86a20f9469cfc6c, STOP.
+const LEGACY_MAGIC: [u8; 15] = [
+    0x80, 0x02, 0x8a, 0x0a, 0x6c, 0xfc, 0x9c, 0x46, 0xf9, 0x20, 0x6a, 0xa8, 0x50, 0x19, 0x2e,
+];
+
+/// Reads every tensor of a PyTorch checkpoint, zip or legacy format.
+fn read_pth(path: &Path) -> candle_core::Result<Vec<(String, Tensor)>> {
+    let mut head = [0u8; 4];
+    std::fs::File::open(path)?.read_exact(&mut head)?;
+    if &head == b"PK\x03\x04" {
+        candle_core::pickle::read_all(path)
+    } else {
+        read_legacy_pth(path)
+    }
+}
+
+fn pickle_err(what: &str, obj: &Object) -> candle_core::Error {
+    candle_core::Error::Msg(format!("unexpected {what} in legacy checkpoint: {obj:?}"))
+}
+
+fn next_pickle<R: BufRead>(r: &mut R) -> candle_core::Result<Object> {
+    let mut stack = Stack::empty();
+    stack.read_loop(r)?;
+    stack.finalize()
+}
+
+/// One tensor of the legacy state_dict: storage key, element type, offset, shape, strides.
+struct LegacyTensor {
+    name: String,
+    key: String,
+    dtype: DType,
+    offset: usize,
+    shape: Vec<usize>,
+    strides: Vec<usize>,
+}
+
+fn usizes(obj: Object) -> candle_core::Result<Vec<usize>> {
+    match obj {
+        Object::Tuple(v) | Object::List(v) => v
+            .into_iter()
+            .map(|o| match o {
+                Object::Int(i) if i >= 0 => Ok(i as usize),
+                Object::Long(i) if i >= 0 => Ok(i as usize),
+                o => Err(pickle_err("dimension", &o)),
+            })
+            .collect(),
+        o => Err(pickle_err("shape", &o)),
+    }
+}
+
+fn legacy_tensor(name: String, value: Object) -> candle_core::Result<Option<LegacyTensor>> {
+    let Object::Reduce { callable, args } = value else {
+        return Ok(None);
+    };
+    let (callable, args) = match *callable {
+        // nn.Parameter wrapping: _rebuild_parameter(tensor, requires_grad, hooks).
+        Object::Class { ref class_name, .. } if class_name == "_rebuild_parameter" => {
+            match args
+                .tuple()
+                .map_err(|o| pickle_err("parameter", &o))?
+                .into_iter()
+                .next()
+            {
+                Some(Object::Reduce { callable, args }) => (*callable, *args),
+                other => return Err(pickle_err("parameter", &other.unwrap_or(Object::None))),
+            }
+        }
+        c => (c, *args),
+    };
+    match &callable {
+        Object::Class {
+            module_name,
+            class_name,
+        } if module_name == "torch._utils"
+            && (class_name == "_rebuild_tensor_v2" || class_name == "_rebuild_tensor") => {}
+        _ => return Ok(None),
+    }
+    let mut args = args
+        .tuple()
+        .map_err(|o| pickle_err("tensor arguments", &o))?
+        .into_iter();
+    let (Some(storage), Some(offset), Some(shape), Some(strides)) =
+        (args.next(), args.next(), args.next(), args.next())
+    else {
+        return Err(candle_core::Error::Msg(format!(
+            "tensor `{name}` has too few rebuild arguments"
+        )));
+    };
+    let storage = storage
+        .persistent_load()
+        .map_err(|o| pickle_err("storage reference", &o))?;
+    // ('storage', <StorageType>, key, location, numel, view_metadata)
+    let mut st = storage
+        .tuple()
+        .map_err(|o| pickle_err("storage id", &o))?
+        .into_iter()
+        .skip(1);
+    let (Some(Object::Class { class_name, .. }), Some(Object::Unicode(key))) =
+        (st.next(), st.next())
+    else {
+        return Err(candle_core::Error::Msg(format!(
+            "tensor `{name}`: malformed storage id"
+        )));
+    };
+    let dtype = match class_name.as_str() {
+        "FloatStorage" => DType::F32,
+        "DoubleStorage" => DType::F64,
+        other => {
+            return Err(candle_core::Error::Msg(format!(
+                "tensor `{name}`: unsupported storage {other}"
+            )));
+        }
+    };
+    let offset = match offset {
+        Object::Int(i) if i >= 0 => i as usize,
+        Object::Long(i) if i >= 0 => i as usize,
+        o => return Err(pickle_err("storage offset", &o)),
+    };
+    Ok(Some(LegacyTensor {
+        name,
+        key,
+        dtype,
+        offset,
+        shape: usizes(shape)?,
+        strides: usizes(strides)?,
+    }))
+}
+
+/// Legacy (pre-zip) `torch.save` stream: magic, protocol version, sys_info, the object, the list
+/// of storage keys, then per key an i64 element count and the raw little-endian storage.
+fn read_legacy_pth(path: &Path) -> candle_core::Result<Vec<(String, Tensor)>> {
+    let mut r = BufReader::new(std::fs::File::open(path)?);
+    let mut magic = [0u8; LEGACY_MAGIC.len()];
+    r.read_exact(&mut magic)?;
+    if magic != LEGACY_MAGIC {
+        candle_core::bail!("not a PyTorch checkpoint (neither zip nor legacy format)");
+    }
+    next_pickle(&mut r)?; // protocol version
+    next_pickle(&mut r)?; // sys_info
+    let Object::Dict(entries) = next_pickle(&mut r)? else {
+        candle_core::bail!("legacy checkpoint does not hold a state_dict");
+    };
+    let mut tensors = Vec::new();
+    for (k, v) in entries {
+        if let Object::Unicode(name) = k
+            && let Some(t) = legacy_tensor(name, v)?
+        {
+            tensors.push(t);
+        }
+    }
+    let keys = match next_pickle(&mut r)? {
+        Object::List(v) => v
+            .into_iter()
+            .map(|o| o.unicode().map_err(|o| pickle_err("storage key", &o)))
+            .collect::<candle_core::Result<Vec<String>>>()?,
+        o => return Err(pickle_err("storage key list", &o)),
+    };
+    let mut storages: HashMap<String, Vec<u8>> = HashMap::new();
+    for key in keys {
+        let mut n = [0u8; 8];
+        r.read_exact(&mut n)?;
+        let numel = i64::from_le_bytes(n);
+        let elem = tensors
+            .iter()
+            .find(|t| t.key == key)
+            .map_or(4, |t| t.dtype.size_in_bytes());
+        let len = usize::try_from(numel)
+            .ok()
+            .and_then(|n| n.checked_mul(elem));
+        let Some(len) = len.filter(|&l| l <= 1 << 34) else {
+            candle_core::bail!("storage {key} has an invalid size {numel}");
+        };
+        let mut bytes = vec![0u8; len];
+        r.read_exact(&mut bytes)?;
+        storages.insert(key, bytes);
+    }
+    tensors
+        .into_iter()
+        .map(|t| {
+            let numel: usize = t.shape.iter().product();
+            let mut expected = 1;
+            for (&dim, &stride) in t.shape.iter().zip(&t.strides).rev() {
+                if dim > 1 && stride != expected {
+                    candle_core::bail!("tensor `{}` is not contiguous", t.name);
+                }
+                expected *= dim;
+            }
+            let es = t.dtype.size_in_bytes();
+            let bytes = storages
+                .get(&t.key)
+                .and_then(|b| b.get(t.offset * es..(t.offset + numel) * es));
+            let Some(bytes) = bytes else {
+                candle_core::bail!("tensor `{}` lies outside its storage", t.name);
+            };
+            let tensor = Tensor::from_raw_buffer(bytes, t.dtype, &t.shape, &Device::Cpu)?;
+            Ok((t.name, tensor))
+        })
+        .collect()
 }
