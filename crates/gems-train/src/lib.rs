@@ -6,12 +6,17 @@
 //! * [`adam`] — torch-semantics Adam on flat SoA parameter groups.
 //! * [`mcmc`] — gsplat `MCMCStrategy`: relocation, growth, SGLD noise.
 //! * [`normalize`] — PRISM3D scene normalisation (orient up, centre, scale) and its inverse.
+//! * [`blur`] — the blur model: n virtual cameras in one render call, mean, and the gradient
+//!   chain to Gaussians and trajectory knots.
+//! * [`trainer`] — [`trainer::Trainer`]: the joint optimisation loop and its checkpointable state.
 //! * [`init`] — Gaussians from SfM points (3-NN scales) or random points in the camera frustums.
 pub mod adam;
+pub mod blur;
 pub mod config;
 pub mod init;
 pub mod mcmc;
 pub mod normalize;
+pub mod trainer;
 
 pub use config::{TrainConfig, TrajectoryKind};
 

@@ -1,0 +1,586 @@
+//! The joint optimisation loop: Gaussians (Adam + 3DGS-MCMC) and per-image trajectories (Adam
+//! with gradient accumulation), one blurry image per step through the blur model.
+//!
+//! Per step (gsplat ≥ 1.5 order): pick the next image of a per-epoch shuffled order, random
+//! background, render its n virtual cameras in one call, average, fused loss
+//! (1−λ)·L1 + λ·(1 − SSIM_valid) + MCMC regularisers, backward, Adam on every Gaussian group,
+//! knot gradients summed and applied every `accumulate_steps`, then MCMC relocation/growth on
+//! refinement steps and SGLD noise with the already decayed means lr.
+//!
+//! Everything that changes during training lives in [`TrainState`], which checkpoints save and
+//! resume restores, so a resumed run continues bit-identically.
+
+use std::time::Instant;
+
+use gems_math::{Se3, Trajectory};
+use gems_metrics::TrainingLoss;
+use gems_splat::{Gaussians, Gradients, Renderer};
+use rand::seq::SliceRandom;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::TrainError;
+use crate::adam::{AdamHyper, AdamState};
+use crate::blur::{BlurWorkspace, Intrinsics, Rasterizer, backward_blurred, render_blurred};
+use crate::config::{TrainConfig, TrajectoryKind};
+use crate::mcmc::{BinomialTable, GaussianAdam, add_new, inject_noise, relocate_dead};
+use crate::normalize::Normalization;
+
+/// One blurry training image, in the normalised frame.
+#[derive(Clone, Debug)]
+pub struct TrainView {
+    pub name: String,
+    /// Blurry RGB `[H,W,3]` in [0, 1].
+    pub image: Vec<f32>,
+    pub intrinsics: Intrinsics,
+    /// Initial camera-to-world pose (from SfM, ground truth, or noisy ground truth).
+    pub c2w_init: Se3,
+    /// Ground-truth mid-exposure camera-to-world pose when known (for APE).
+    pub c2w_gt: Option<Se3>,
+}
+
+/// Everything training starts from.
+#[derive(Clone, Debug)]
+pub struct TrainInput {
+    pub views: Vec<TrainView>,
+    /// Initial Gaussians in the normalised frame.
+    pub gaussians: Gaussians,
+    pub normalization: Normalization,
+    /// Scene extent (means lr and noise scale).
+    pub scene_scale: f32,
+    /// How the poses/points were initialised ("colmap", "gt", "gt-noisy (σ …)", "sfm", …).
+    pub init_label: String,
+}
+
+/// Per-step training curves (kept for the report).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct History {
+    pub loss: Vec<f32>,
+    /// PSNR of the synthesised blurry image against the blurry input.
+    pub psnr: Vec<f32>,
+    pub gaussians: Vec<u32>,
+    /// Training image index of each step.
+    pub view: Vec<u32>,
+}
+
+/// All mutable training state (exactly what a checkpoint holds).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainState {
+    /// Steps completed.
+    pub step: usize,
+    pub gaussians: Gaussians,
+    pub adam: GaussianAdam,
+    /// Knots of every view, `[V][K][6]` flat, [ρ; φ] each.
+    pub knots: Vec<f32>,
+    pub knot_adam: AdamState,
+    /// Knot gradients summed since the last pose step.
+    pub knot_grad_acc: Vec<f32>,
+    /// ChaCha8 stream position (the seed comes from the config).
+    pub rng_word_pos: u128,
+    /// Current epoch's view order and the position in it.
+    pub order: Vec<u32>,
+    pub order_pos: usize,
+    pub history: History,
+    /// Wall-clock training seconds so far (excluded from bit-identity).
+    pub seconds: f64,
+}
+
+/// What one step reports.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepReport {
+    pub step: usize,
+    pub loss: f32,
+    pub psnr: f32,
+    pub gaussians: usize,
+}
+
+fn math_kind(k: TrajectoryKind) -> gems_math::TrajectoryKind {
+    match k {
+        TrajectoryKind::Bezier => gems_math::TrajectoryKind::Bezier,
+        TrajectoryKind::Linear => gems_math::TrajectoryKind::Linear,
+        TrajectoryKind::Spline => gems_math::TrajectoryKind::CubicBSpline,
+    }
+}
+
+/// The trajectory of view `v` from the flat knot array.
+pub fn trajectory_of(cfg: &TrainConfig, knots: &[f32], v: usize) -> Trajectory {
+    let k = cfg.num_knots();
+    let ks = knots[v * k * 6..(v + 1) * k * 6]
+        .chunks_exact(6)
+        .map(|c| std::array::from_fn(|i| c[i] as f64))
+        .collect();
+    Trajectory::new(math_kind(cfg.trajectory), ks).expect("knot count comes from the config")
+}
+
+/// PSNR (data range 1, clamped) of two same-size buffers.
+pub fn psnr(a: &[f32], b: &[f32]) -> f32 {
+    let mse = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| {
+            let d = x.clamp(0.0, 1.0) as f64 - y.clamp(0.0, 1.0) as f64;
+            d * d
+        })
+        .sum::<f64>()
+        / a.len().max(1) as f64;
+    (-10.0 * mse.max(1e-20).log10()) as f32
+}
+
+/// The trainer: configuration, data and state, plus reusable buffers.
+pub struct Trainer {
+    pub cfg: TrainConfig,
+    pub views: Vec<TrainView>,
+    pub normalization: Normalization,
+    pub scene_scale: f32,
+    pub init_label: String,
+    pub state: TrainState,
+    renderer: Renderer,
+    rng: ChaCha8Rng,
+    losses: Vec<((u32, u32), TrainingLoss)>,
+    ws: BlurWorkspace,
+    d_blurred: Vec<f32>,
+    knot_grads: Vec<[f64; 6]>,
+    binoms: BinomialTable,
+    times: Vec<f64>,
+}
+
+impl Trainer {
+    /// A fresh run: knots ~ N(0, knot_init_std²) from the seeded generator.
+    pub fn new(cfg: TrainConfig, input: TrainInput) -> Result<Self, TrainError> {
+        cfg.validate().map_err(TrainError::Config)?;
+        if input.views.is_empty() {
+            return Err(TrainError::Input("no training views".into()));
+        }
+        for v in &input.views {
+            let k = &v.intrinsics;
+            if v.image.len() != (k.width * k.height * 3) as usize {
+                return Err(TrainError::Input(format!(
+                    "view {}: image has {} values, intrinsics say {}x{}x3",
+                    v.name,
+                    v.image.len(),
+                    k.width,
+                    k.height
+                )));
+            }
+        }
+        input.gaussians.validate()?;
+        let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+        let nk = cfg.num_knots() * 6 * input.views.len();
+        let normal = rand_distr::Normal::new(0.0, cfg.pose.knot_init_std)
+            .map_err(|e| TrainError::Config(e.to_string()))?;
+        let knots: Vec<f32> = (0..nk)
+            .map(|_| rand_distr::Distribution::sample(&normal, &mut rng) as f32)
+            .collect();
+        let n = input.gaussians.len();
+        let mut gaussians = input.gaussians;
+        gaussians.sh_degree = 0;
+        let state = TrainState {
+            step: 0,
+            gaussians,
+            adam: GaussianAdam::new(n),
+            knot_adam: AdamState::new(nk / 6, 6),
+            knot_grad_acc: vec![0.0; nk],
+            knots,
+            rng_word_pos: 0,
+            order: Vec::new(),
+            order_pos: 0,
+            history: History::default(),
+            seconds: 0.0,
+        };
+        let mut t = Self::assemble(
+            cfg,
+            input.views,
+            input.normalization,
+            input.scene_scale,
+            input.init_label,
+            state,
+        );
+        t.rng = rng;
+        Ok(t)
+    }
+
+    /// Rebuilds a trainer around a saved state (resume).
+    pub fn from_state(
+        cfg: TrainConfig,
+        views: Vec<TrainView>,
+        normalization: Normalization,
+        scene_scale: f32,
+        init_label: String,
+        state: TrainState,
+    ) -> Result<Self, TrainError> {
+        let expect = cfg.num_knots() * 6 * views.len();
+        if state.knots.len() != expect || state.adam.means.rows() != state.gaussians.len() {
+            return Err(TrainError::Input(format!(
+                "checkpoint does not match this run: {} knot values (expected {expect}), {} Adam rows for {} Gaussians",
+                state.knots.len(),
+                state.adam.means.rows(),
+                state.gaussians.len()
+            )));
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+        rng.set_word_pos(state.rng_word_pos);
+        let mut t = Self::assemble(cfg, views, normalization, scene_scale, init_label, state);
+        t.rng = rng;
+        Ok(t)
+    }
+
+    fn assemble(
+        cfg: TrainConfig,
+        views: Vec<TrainView>,
+        normalization: Normalization,
+        scene_scale: f32,
+        init_label: String,
+        state: TrainState,
+    ) -> Self {
+        let times = cfg.virtual_times();
+        let k = cfg.num_knots();
+        Self {
+            rng: ChaCha8Rng::seed_from_u64(cfg.seed),
+            times,
+            knot_grads: vec![[0.0; 6]; k],
+            cfg,
+            views,
+            normalization,
+            scene_scale,
+            init_label,
+            state,
+            renderer: Renderer::new(),
+            losses: Vec::new(),
+            ws: BlurWorkspace::default(),
+            d_blurred: Vec::new(),
+            binoms: BinomialTable::default(),
+        }
+    }
+
+    pub fn is_done(&self) -> bool {
+        self.state.step >= self.cfg.steps
+    }
+
+    /// The trajectory of view `v`.
+    pub fn trajectory(&self, v: usize) -> Trajectory {
+        trajectory_of(&self.cfg, &self.state.knots, v)
+    }
+
+    fn next_view(&mut self) -> usize {
+        if self.state.order_pos >= self.state.order.len() {
+            let mut order: Vec<u32> = (0..self.views.len() as u32).collect();
+            order.shuffle(&mut self.rng);
+            self.state.order = order;
+            self.state.order_pos = 0;
+        }
+        let v = self.state.order[self.state.order_pos] as usize;
+        self.state.order_pos += 1;
+        v
+    }
+
+    fn loss_for(&mut self, w: u32, h: u32) -> Result<usize, TrainError> {
+        if let Some(i) = self.losses.iter().position(|(s, _)| *s == (w, h)) {
+            return Ok(i);
+        }
+        let l = TrainingLoss::new(h as usize, w as usize, self.cfg.ssim_lambda)
+            .map_err(|e| TrainError::Input(format!("loss for {w}x{h} images: {e}")))?;
+        self.losses.push(((w, h), l));
+        Ok(self.losses.len() - 1)
+    }
+
+    /// One optimisation step.
+    pub fn step(&mut self) -> Result<StepReport, TrainError> {
+        let start = Instant::now();
+        let step = self.state.step;
+        self.state.gaussians.sh_degree = self.cfg.sh_degree_at(step);
+        let v = self.next_view();
+        let bg: [f32; 3] = if self.cfg.random_background {
+            std::array::from_fn(|_| self.rng.random::<f32>())
+        } else {
+            [0.0; 3]
+        };
+        let traj = self.trajectory(v);
+        let view = &self.views[v];
+        let k = view.intrinsics;
+        render_blurred(
+            &mut self.renderer,
+            &self.state.gaussians,
+            &view.c2w_init,
+            &traj,
+            &self.times,
+            &k,
+            bg,
+            &mut self.ws,
+        )?;
+        let li = self.loss_for(k.width, k.height)?;
+        let view = &self.views[v];
+        self.d_blurred.resize(view.image.len(), 0.0);
+        let lv = self.losses[li]
+            .1
+            .compute(&self.ws.blurred, &view.image, &mut self.d_blurred)
+            .map_err(|e| TrainError::Input(format!("view {}: {e}", view.name)))?;
+        let train_psnr = psnr(&self.ws.blurred, &view.image);
+        for kg in &mut self.knot_grads {
+            *kg = [0.0; 6];
+        }
+        let mut grads = backward_blurred(
+            &mut self.renderer,
+            &self.state.gaussians,
+            &traj,
+            &self.times,
+            &self.d_blurred,
+            &mut self.ws,
+            &mut self.knot_grads,
+        )?;
+        let reg = add_regularizers(&self.cfg, &self.state.gaussians, &mut grads);
+        self.adam_gaussians(&grads, step);
+        self.pose_update(v, step);
+
+        // MCMC after the optimizer step (gsplat ≥ 1.5), with the decayed lr.
+        if self.cfg.is_refine_step(step) {
+            let c = &self.cfg.mcmc;
+            let moved = relocate_dead(
+                &mut self.state.gaussians,
+                &mut self.state.adam,
+                c.min_opacity,
+                &self.binoms,
+                &mut self.rng,
+            );
+            let added = add_new(
+                &mut self.state.gaussians,
+                &mut self.state.adam,
+                c.cap_max,
+                c.growth_factor,
+                c.min_opacity,
+                &self.binoms,
+                &mut self.rng,
+            );
+            tracing::debug!(
+                step,
+                moved,
+                added,
+                total = self.state.gaussians.len(),
+                "MCMC refine"
+            );
+        }
+        let noise = self.cfg.means_lr(step + 1, self.scene_scale) * self.cfg.mcmc.noise_lr;
+        inject_noise(
+            &mut self.state.gaussians,
+            noise,
+            self.cfg.mcmc.min_opacity,
+            &mut self.rng,
+        );
+
+        let loss = lv.loss + reg;
+        let h = &mut self.state.history;
+        h.loss.push(loss);
+        h.psnr.push(train_psnr);
+        h.gaussians.push(self.state.gaussians.len() as u32);
+        h.view.push(v as u32);
+        self.state.step += 1;
+        self.state.rng_word_pos = self.rng.get_word_pos();
+        self.state.seconds += start.elapsed().as_secs_f64();
+        Ok(StepReport {
+            step: self.state.step,
+            loss,
+            psnr: train_psnr,
+            gaussians: self.state.gaussians.len(),
+        })
+    }
+
+    fn adam_gaussians(&mut self, gr: &Gradients, step: usize) {
+        let c = &self.cfg;
+        let h = AdamHyper {
+            beta1: c.adam_beta1,
+            beta2: c.adam_beta2,
+            eps: c.adam_eps,
+        };
+        let g = &mut self.state.gaussians;
+        let a = &mut self.state.adam;
+        let lr_means = c.means_lr(step, self.scene_scale);
+        a.means.step(
+            bytemuck::cast_slice_mut(&mut g.means),
+            bytemuck::cast_slice(&gr.means),
+            lr_means,
+            0.0,
+            h,
+        );
+        a.quats.step(
+            bytemuck::cast_slice_mut(&mut g.quats),
+            bytemuck::cast_slice(&gr.quats),
+            c.lr.quats,
+            0.0,
+            h,
+        );
+        a.log_scales.step(
+            bytemuck::cast_slice_mut(&mut g.log_scales),
+            bytemuck::cast_slice(&gr.log_scales),
+            c.lr.log_scales,
+            0.0,
+            h,
+        );
+        a.opacity_logits.step(
+            &mut g.opacity_logits,
+            &gr.opacity_logits,
+            c.lr.opacities,
+            0.0,
+            h,
+        );
+        let (dc, rest) = (c.lr.sh_dc, c.lr.sh_rest);
+        a.sh.step_by_column(
+            bytemuck::cast_slice_mut(&mut g.sh),
+            bytemuck::cast_slice(&gr.sh),
+            |col| if col < 3 { dc } else { rest },
+            0.0,
+            h,
+        );
+    }
+
+    fn pose_update(&mut self, v: usize, step: usize) {
+        if !self.cfg.pose.optimize {
+            return;
+        }
+        let k = self.cfg.num_knots();
+        let acc = &mut self.state.knot_grad_acc[v * k * 6..(v + 1) * k * 6];
+        for (a, g) in acc.iter_mut().zip(self.knot_grads.iter().flatten()) {
+            *a += *g as f32;
+        }
+        let every = self.cfg.pose.accumulate_steps;
+        if step % every == every - 1 {
+            let c = &self.cfg;
+            let h = AdamHyper {
+                beta1: c.adam_beta1,
+                beta2: c.adam_beta2,
+                eps: c.adam_eps,
+            };
+            self.state.knot_adam.step(
+                &mut self.state.knots,
+                &self.state.knot_grad_acc,
+                c.pose_lr(step),
+                c.pose.weight_decay,
+                h,
+            );
+            self.state.knot_grad_acc.fill(0.0);
+        }
+    }
+
+    /// Runs to the configured number of steps, calling `on_step` after each.
+    pub fn run(
+        &mut self,
+        mut on_step: impl FnMut(&Trainer, &StepReport) -> Result<(), TrainError>,
+    ) -> Result<(), TrainError> {
+        while !self.is_done() {
+            let r = self.step()?;
+            if r.step % self.cfg.log_every.max(1) == 0 || r.step == self.cfg.steps {
+                tracing::info!(
+                    step = r.step,
+                    loss = r.loss,
+                    psnr = r.psnr,
+                    gaussians = r.gaussians,
+                    "train"
+                );
+            }
+            on_step(self, &r)?;
+        }
+        Ok(())
+    }
+
+    /// Mid-exposure (u = 0.5) camera-to-world pose of view `v`.
+    pub fn mid_pose(&self, v: usize) -> Se3 {
+        self.views[v].c2w_init * self.trajectory(v).eval(0.5)
+    }
+
+    /// The virtual camera-to-world poses of view `v`.
+    pub fn virtual_poses(&self, v: usize) -> Vec<Se3> {
+        crate::blur::virtual_c2w(&self.views[v].c2w_init, &self.trajectory(v), &self.times)
+    }
+
+    /// Renders view `v` from `c2w` with a black background (for evaluation and tests).
+    pub fn render_view(&mut self, c2w: &Se3, k: &Intrinsics) -> Result<Vec<f32>, TrainError> {
+        let mut g = self.state.gaussians.clone();
+        g.sh_degree = self.cfg.sh_degree;
+        let cam = crate::blur::camera_from_c2w(c2w, k);
+        Ok(self.renderer.render(&g, &[cam], &[[0.0; 3]])?)
+    }
+}
+
+/// Adds the MCMC regularisers' gradients; returns their value.
+/// opacity_reg·mean(sigmoid(l)) and scale_reg·mean(exp(log_scale)) over all N·3 entries.
+fn add_regularizers(cfg: &TrainConfig, g: &Gaussians, grads: &mut Gradients) -> f32 {
+    let n = g.len();
+    if n == 0 {
+        return 0.0;
+    }
+    let (or, sr) = (cfg.mcmc.opacity_reg, cfg.mcmc.scale_reg);
+    let mut value = 0.0f64;
+    for (i, &l) in g.opacity_logits.iter().enumerate() {
+        let s = 1.0 / (1.0 + (-l).exp());
+        value += (or * s) as f64 / n as f64;
+        grads.opacity_logits[i] += or * s * (1.0 - s) / n as f32;
+    }
+    for (i, ls) in g.log_scales.iter().enumerate() {
+        for a in 0..3 {
+            let e = ls[a].exp();
+            value += (sr * e) as f64 / (3 * n) as f64;
+            grads.log_scales[i][a] += sr * e / (3 * n) as f32;
+        }
+    }
+    value as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regularizer_gradients_match_finite_differences() {
+        let cfg = TrainConfig::default();
+        let mut g = Gaussians::with_degree(0);
+        g.push(
+            [0.0; 3],
+            [1.0, 0.0, 0.0, 0.0],
+            [-1.0, 0.5, -2.0],
+            0.3,
+            [[0.0; 3]; 16],
+        );
+        g.push(
+            [0.0; 3],
+            [1.0, 0.0, 0.0, 0.0],
+            [0.1, -0.5, -0.2],
+            -1.2,
+            [[0.0; 3]; 16],
+        );
+        let zero = || Gradients {
+            opacity_logits: vec![0.0; 2],
+            log_scales: vec![[0.0; 3]; 2],
+            ..Default::default()
+        };
+        let mut gr = zero();
+        add_regularizers(&cfg, &g, &mut gr);
+        let eps = 1e-3f32;
+        let f = |g: &Gaussians| add_regularizers(&cfg, g, &mut zero()) as f64;
+        let mut gp = g.clone();
+        gp.opacity_logits[1] += eps;
+        let mut gm = g.clone();
+        gm.opacity_logits[1] -= eps;
+        let fd = (f(&gp) - f(&gm)) / (2.0 * eps as f64);
+        assert!(
+            (fd - gr.opacity_logits[1] as f64).abs() < 1e-5 * fd.abs().max(1e-3) + 1e-7,
+            "{fd} vs {}",
+            gr.opacity_logits[1]
+        );
+        let mut gp = g.clone();
+        gp.log_scales[0][1] += eps;
+        let mut gm = g.clone();
+        gm.log_scales[0][1] -= eps;
+        let fd = (f(&gp) - f(&gm)) / (2.0 * eps as f64);
+        assert!(
+            (fd - gr.log_scales[0][1] as f64).abs() < 1e-3 * fd.abs(),
+            "{fd} vs {}",
+            gr.log_scales[0][1]
+        );
+    }
+
+    #[test]
+    fn psnr_of_known_error() {
+        let a = vec![0.5f32; 12];
+        let b = vec![0.6f32; 12];
+        assert!((psnr(&a, &b) - 20.0).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,111 @@
+//! Tiny synthetic scenes for the training tests: a random textured Gaussian "wall" and a few
+//! cameras looking at it, each with a known exposure trajectory.
+#![allow(dead_code)]
+
+use gems_math::{Se3, Vector3, Vector6};
+use gems_splat::{Camera, Gaussians, Gradients, RenderSettings, SplatError, reference};
+use gems_train::blur::{Intrinsics, Rasterizer};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// A wall of `n` coloured Gaussians at depth ≈ 2.5 in front of cameras near the origin.
+pub fn wall(n: usize, seed: u64, extent: f32) -> Gaussians {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut g = Gaussians::with_degree(0);
+    for _ in 0..n {
+        let mean = [
+            (rng.random::<f32>() - 0.5) * 2.0 * extent,
+            (rng.random::<f32>() - 0.5) * 2.0 * extent * 0.8,
+            2.5 + (rng.random::<f32>() - 0.5) * 0.3,
+        ];
+        let mut sh = [[0.0f32; 3]; 16];
+        sh[0] = std::array::from_fn(|_| (rng.random::<f32>() - 0.5) / 0.2820948);
+        let s = (0.04 + 0.05 * rng.random::<f32>()) * extent;
+        let q: [f32; 4] = std::array::from_fn(|_| rng.random::<f32>() - 0.5);
+        g.push(mean, q, [s.ln(), (s * 0.6).ln(), (s * 0.8).ln()], 2.0, sh);
+    }
+    g
+}
+
+pub fn intrinsics(w: u32, h: u32) -> Intrinsics {
+    Intrinsics {
+        fx: w as f32 * 0.9,
+        fy: w as f32 * 0.9,
+        cx: w as f32 / 2.0,
+        cy: h as f32 / 2.0,
+        width: w,
+        height: h,
+    }
+}
+
+/// A camera-to-world pose near the origin looking down +z (OpenCV), offset by `x`.
+pub fn pose(x: f64, y: f64, yaw: f64) -> Se3 {
+    Se3::exp(&Vector6::new(x, y, 0.0, 0.0, yaw, 0.0))
+}
+
+pub fn tangent(v: [f64; 6]) -> Vector6<f64> {
+    Vector6::from(v)
+}
+
+pub fn center(p: &Se3) -> Vector3<f64> {
+    p.trans
+}
+
+/// The f64 dense reference renderer behind the `Rasterizer` trait (results rounded to f32).
+pub struct Reference(pub RenderSettings);
+
+/// Settings without the hard 1/255 and 3.33σ cut-offs, so finite differences see a smooth loss.
+pub fn smooth_settings() -> RenderSettings {
+    RenderSettings {
+        alpha_min: 0.0,
+        radius_extent: 8.0,
+        ..RenderSettings::default()
+    }
+}
+
+impl Rasterizer for Reference {
+    fn render(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        bgs: &[[f32; 3]],
+    ) -> Result<Vec<f32>, SplatError> {
+        Ok(reference::forward(g, cams, bgs, &self.0)?
+            .rgb
+            .iter()
+            .map(|&v| v as f32)
+            .collect())
+    }
+
+    fn gradients(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        bgs: &[[f32; 3]],
+        d_rgb: &[f32],
+    ) -> Result<Gradients, SplatError> {
+        let d: Vec<f64> = d_rgb.iter().map(|&v| v as f64).collect();
+        let r = reference::backward(g, cams, bgs, &self.0, &d, None)?;
+        let f3 = |v: &[f64; 3]| v.map(|x| x as f32);
+        Ok(Gradients {
+            means: r.means.iter().map(f3).collect(),
+            quats: r.quats.iter().map(|v| v.map(|x| x as f32)).collect(),
+            log_scales: r.log_scales.iter().map(f3).collect(),
+            opacity_logits: r.opacity_logits.iter().map(|&x| x as f32).collect(),
+            sh: r
+                .sh
+                .iter()
+                .map(|s| s.map(|c| c.map(|x| x as f32)))
+                .collect(),
+            backgrounds: r.backgrounds.iter().map(f3).collect(),
+            cam_rotation: r
+                .cam_rotation
+                .iter()
+                .map(|m| m.map(|row| row.map(|x| x as f32)))
+                .collect(),
+            cam_translation: r.cam_translation.iter().map(f3).collect(),
+            mean2d_grad_norm: r.mean2d_grad_norm.iter().map(|&x| x as f32).collect(),
+            visible_count: r.visible_count.clone(),
+        })
+    }
+}
