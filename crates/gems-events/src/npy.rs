@@ -230,7 +230,21 @@ pub(crate) fn read_npz_from<R: Read + Seek>(
     };
     let (t, x, y, p) = (get("t")?, get("x")?, get("y")?, get("p")?);
     let t = time_column(t, opts, path)?;
-    build_stream(path, opts, t, &x.as_f64(), &y.as_f64(), &p.as_f64())
+    let mut opts = *opts;
+    if opts.size.is_none() {
+        // our writer stores the sensor size; other producers do not
+        let mut scalar = |name: &str| -> Option<u16> {
+            let npy = npz.by_name(name).ok()??;
+            match read_column(npy, path, name).ok()?.1 {
+                Column::Int(v) if v.len() == 1 => u16::try_from(v[0]).ok(),
+                _ => None,
+            }
+        };
+        if let (Some(w), Some(h)) = (scalar("width"), scalar("height")) {
+            opts.size = Some((w, h));
+        }
+    }
+    build_stream(path, &opts, t, &x.as_f64(), &y.as_f64(), &p.as_f64())
 }
 
 /// Writes `events` as an uncompressed `.npz` with `t` (int64 µs), `x`, `y` (uint16), `p` (int8 ±1),

@@ -139,8 +139,8 @@ pub(crate) fn build_stream(
     let mut ps = Vec::with_capacity(n);
     for (i, &a) in p.iter().enumerate() {
         ps.push(match a {
-            v if v == 1.0 => 1,
-            v if v == 0.0 || v == -1.0 => -1,
+            1.0 => 1,
+            0.0 | -1.0 => -1,
             v => {
                 return Err(EventError::format(
                     path,

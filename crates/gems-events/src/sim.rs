@@ -90,7 +90,7 @@ impl Simulator {
         if config.refractory_us < 0 {
             return bad("refractory period must be ≥ 0");
         }
-        if !(config.log_eps > 0.0) {
+        if config.log_eps.is_nan() || config.log_eps <= 0.0 {
             return bad("log ε must be > 0");
         }
         if width == 0 || height == 0 {
