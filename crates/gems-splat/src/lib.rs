@@ -19,6 +19,7 @@
 //! * [`reference`] — a slow, dense, f64 renderer with the same semantics; the fast path and
 //!   the gsplat test vectors are checked against it and it is checked by finite differences.
 //! * [`ply`] — Inria-layout PLY read/write (opens in common splat viewers).
+//! * [`write_png`] — one camera of a [`RenderOutput`] as an 8-bit PNG, written atomically.
 //!
 //! Per-(camera, Gaussian) projection, SH colour and their backward are computed in f64 by one
 //! shared implementation (`project`); it is cheap next to the per-pixel work, which is f32 in the
@@ -28,11 +29,14 @@
 // Small fixed-size matrix and channel loops read best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
+pub mod ply;
+mod png;
 mod project;
 mod raster;
 pub mod reference;
 mod sh;
 
+pub use png::write_png;
 pub use raster::Renderer;
 
 /// Number of SH coefficients per colour channel stored per Gaussian (degree 3).
@@ -56,6 +60,12 @@ pub enum SplatError {
     /// Reading or writing a PLY file failed.
     #[error("PLY file {path}: {reason}")]
     Ply {
+        path: std::path::PathBuf,
+        reason: String,
+    },
+    /// Writing an image failed.
+    #[error("image file {path}: {reason}")]
+    Image {
         path: std::path::PathBuf,
         reason: String,
     },

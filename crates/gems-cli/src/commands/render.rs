@@ -1,9 +1,171 @@
-//! `gems render` (owned by the stage that implements it; replaced when that stage lands).
+//! `gems render`: render a Gaussian-splat PLY to PNG from a camera given on the command line.
+//!
+//! The pose is either a position and a look-at target (`--cam-pos`, `--look-at`, optional
+//! `--up`) or an explicit OpenCV world-to-camera rotation and translation (`--rotation`,
+//! `--translation`). Reading cameras from COLMAP/LLFF files waits for the data layer's readers.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use gems_splat::{Camera, RenderSettings, Renderer, ply, write_png};
 
 /// Arguments of `gems render`.
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Inria-layout Gaussian-splat PLY file.
+    pub ply: PathBuf,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 800)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 600)]
+    pub height: u32,
+    /// Focal length in pixels along x (default: from --fov).
+    #[arg(long)]
+    pub fx: Option<f32>,
+    /// Focal length in pixels along y (default: fx).
+    #[arg(long)]
+    pub fy: Option<f32>,
+    /// Principal point x (default: width / 2).
+    #[arg(long)]
+    pub cx: Option<f32>,
+    /// Principal point y (default: height / 2).
+    #[arg(long)]
+    pub cy: Option<f32>,
+    /// Horizontal field of view in degrees, used when --fx is not given.
+    #[arg(long, default_value_t = 60.0)]
+    pub fov: f32,
+    /// Camera position in world coordinates: x,y,z.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub cam_pos: Option<[f32; 3]>,
+    /// Point the camera looks at: x,y,z.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub look_at: Option<[f32; 3]>,
+    /// World direction that appears up in the image: x,y,z (OpenCV/COLMAP scenes: 0,-1,0).
+    #[arg(long, value_parser = parse_vec3, default_value = "0,-1,0", allow_hyphen_values = true)]
+    pub up: [f32; 3],
+    /// World-to-camera rotation, 9 numbers row-major (OpenCV: x right, y down, z forward).
+    #[arg(long, value_parser = parse_mat3, allow_hyphen_values = true)]
+    pub rotation: Option<[[f32; 3]; 3]>,
+    /// World-to-camera translation: x,y,z (x_cam = R x_world + t).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub translation: Option<[f32; 3]>,
+    /// Background colour r,g,b in [0, 1].
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0")]
+    pub background: [f32; 3],
+    /// Mip-Splatting antialiased rasterisation (for scenes trained that way).
+    #[arg(long)]
+    pub antialiased: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`gems render` is not available in this build yet")
+fn parse_floats<const K: usize>(s: &str) -> Result<[f32; K], String> {
+    let vals: Vec<f32> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f32>().map_err(|e| format!("`{v}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    if !vals.iter().all(|v| v.is_finite()) {
+        return Err(format!("`{s}` has a non-finite value"));
+    }
+    vals.try_into()
+        .map_err(|v: Vec<f32>| format!("expected {K} comma-separated numbers, got {}", v.len()))
+}
+
+fn parse_vec3(s: &str) -> Result<[f32; 3], String> {
+    parse_floats::<3>(s)
+}
+
+fn parse_mat3(s: &str) -> Result<[[f32; 3]; 3], String> {
+    let v = parse_floats::<9>(s)?;
+    Ok([[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]])
+}
+
+/// Builds the camera from the arguments, rejecting contradictory or incomplete poses.
+pub fn camera(args: &Args) -> anyhow::Result<Camera> {
+    if args.width == 0 || args.height == 0 {
+        bail!("--width and --height must be positive");
+    }
+    if !(args.fov > 0.0 && args.fov < 180.0) {
+        bail!("--fov must be in (0, 180) degrees");
+    }
+    let fx = args
+        .fx
+        .unwrap_or_else(|| 0.5 * args.width as f32 / (0.5 * args.fov.to_radians()).tan());
+    let fy = args.fy.unwrap_or(fx);
+    let cx = args.cx.unwrap_or(0.5 * args.width as f32);
+    let cy = args.cy.unwrap_or(0.5 * args.height as f32);
+    if !(fx > 0.0 && fy > 0.0 && fx.is_finite() && fy.is_finite()) {
+        bail!("focal lengths must be positive");
+    }
+    let look = (args.cam_pos, args.look_at);
+    let explicit = (args.rotation, args.translation);
+    match (look, explicit) {
+        ((Some(pos), Some(target)), (None, None)) => Camera::look_at(
+            fx,
+            fy,
+            cx,
+            cy,
+            args.width,
+            args.height,
+            pos,
+            target,
+            args.up,
+        )
+        .context("--cam-pos equals --look-at, or the view direction is parallel to --up"),
+        ((None, None), (Some(rotation), Some(translation))) => {
+            let r = rotation;
+            // R must be a rotation: RᵀR = I within f32 tolerance.
+            for i in 0..3 {
+                for j in 0..3 {
+                    let d: f32 = (0..3).map(|k| r[k][i] * r[k][j]).sum();
+                    let want = if i == j { 1.0 } else { 0.0 };
+                    if (d - want).abs() > 1e-3 {
+                        bail!("--rotation is not a rotation matrix (RᵀR ≠ I)");
+                    }
+                }
+            }
+            Ok(Camera {
+                fx,
+                fy,
+                cx,
+                cy,
+                width: args.width,
+                height: args.height,
+                rotation,
+                translation,
+            })
+        }
+        _ => bail!(
+            "give the pose as --cam-pos and --look-at, or as --rotation and --translation (not both)"
+        ),
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let cam = camera(&args)?;
+    let g = ply::read_ply(&args.ply)?;
+    tracing::info!(
+        gaussians = g.len(),
+        sh_degree = g.sh_degree,
+        "loaded {}",
+        args.ply.display()
+    );
+    let settings = RenderSettings {
+        antialiased: args.antialiased,
+        ..Default::default()
+    };
+    let mut renderer = Renderer::new();
+    let out = renderer.forward(&g, &[cam], &[args.background], &settings)?;
+    write_png(&args.output, &out, 0)?;
+    let covered = out.alpha.iter().filter(|&&a| a > 0.5).count();
+    tracing::info!(
+        "wrote {} ({}x{}, {:.1}% of pixels covered)",
+        args.output.display(),
+        out.width,
+        out.height,
+        100.0 * covered as f64 / out.alpha.len() as f64
+    );
+    Ok(())
 }
