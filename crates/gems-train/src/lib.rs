@@ -9,11 +9,14 @@
 //! * [`blur`] — the blur model: n virtual cameras in one render call, mean, and the gradient
 //!   chain to Gaussians and trajectory knots.
 //! * [`trainer`] — [`trainer::Trainer`]: the joint optimisation loop and its checkpointable state.
+//! * [`io`] — atomic files, checkpoints (safetensors + JSON) and [`io::TrainOutput`], the
+//!   trained result that gems-eval consumes.
 //! * [`init`] — Gaussians from SfM points (3-NN scales) or random points in the camera frustums.
 pub mod adam;
 pub mod blur;
 pub mod config;
 pub mod init;
+pub mod io;
 pub mod mcmc;
 pub mod normalize;
 pub mod trainer;

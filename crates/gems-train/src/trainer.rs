@@ -95,7 +95,7 @@ pub struct StepReport {
     pub gaussians: usize,
 }
 
-fn math_kind(k: TrajectoryKind) -> gems_math::TrajectoryKind {
+pub(crate) fn math_kind(k: TrajectoryKind) -> gems_math::TrajectoryKind {
     match k {
         TrajectoryKind::Bezier => gems_math::TrajectoryKind::Bezier,
         TrajectoryKind::Linear => gems_math::TrajectoryKind::Linear,

@@ -109,3 +109,116 @@ impl Rasterizer for Reference {
         })
     }
 }
+
+/// A synthetic extreme-blur training set.
+pub struct BlurScene {
+    pub views: Vec<gems_train::trainer::TrainView>,
+    /// Ground-truth sharp mid-exposure renders, `[H,W,3]` each.
+    pub sharp: Vec<Vec<f32>>,
+    pub gt_mid: Vec<Se3>,
+    pub gt: Gaussians,
+}
+
+/// `n_views` cameras on a grid looking at the wall; each blurry image is the mean of 21 sharp
+/// renders along a known exposure motion (translation `motion` plus a yaw), and the initial
+/// pose is the true mid-exposure pose perturbed by noise of scale `pose_noise`.
+pub fn blur_scene(
+    n_views: usize,
+    w: u32,
+    h: u32,
+    motion: f64,
+    pose_noise: f64,
+    seed: u64,
+) -> BlurScene {
+    use gems_train::blur::camera_from_c2w;
+    let gt = wall(500, seed, 2.0);
+    let k = intrinsics(w, h);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed + 1);
+    let mut r = gems_splat::Renderer::new();
+    let mut out = BlurScene {
+        views: vec![],
+        sharp: vec![],
+        gt_mid: vec![],
+        gt: gt.clone(),
+    };
+    let mut g = gt.clone();
+    g.sh_degree = 0;
+    for v in 0..n_views {
+        let mid = pose(
+            (v % 3) as f64 * 0.25 - 0.25,
+            (v / 3) as f64 * 0.2 - 0.1,
+            0.05 * (v as f64 - 2.0),
+        );
+        let ang = rng.random::<f64>() * std::f64::consts::TAU;
+        let m = tangent([
+            motion * ang.cos(),
+            motion * ang.sin(),
+            0.0,
+            0.0,
+            0.3 * motion * ang.sin(),
+            0.1 * motion,
+        ]);
+        let cams: Vec<Camera> = (0..21)
+            .map(|i| camera_from_c2w(&(mid * Se3::exp(&(m * (i as f64 / 20.0 - 0.5)))), &k))
+            .collect();
+        let rgb = r
+            .forward(
+                &g,
+                &cams,
+                &vec![[0.0; 3]; cams.len()],
+                &RenderSettings::default(),
+            )
+            .unwrap()
+            .rgb;
+        let img = (w * h * 3) as usize;
+        let mut blurry = vec![0.0f32; img];
+        for c in rgb.chunks_exact(img) {
+            for (b, x) in blurry.iter_mut().zip(c) {
+                *b += x / 21.0;
+            }
+        }
+        let sharp = r
+            .forward(
+                &g,
+                &[camera_from_c2w(&mid, &k)],
+                &[[0.0; 3]],
+                &RenderSettings::default(),
+            )
+            .unwrap()
+            .rgb;
+        let noise: [f64; 6] = std::array::from_fn(|i| {
+            let s = if i < 3 { pose_noise } else { pose_noise * 0.5 };
+            s * (rng.random::<f64>() * 2.0 - 1.0)
+        });
+        out.views.push(gems_train::trainer::TrainView {
+            name: format!("view{v:02}"),
+            image: blurry,
+            intrinsics: k,
+            c2w_init: mid * Se3::exp(&tangent(noise)),
+            c2w_gt: Some(mid),
+        });
+        out.sharp.push(sharp);
+        out.gt_mid.push(mid);
+    }
+    out
+}
+
+/// Initial Gaussians: the true means jittered, grey, with 3-NN scales (an "SfM" point cloud).
+pub fn init_gaussians(scene: &BlurScene, jitter: f32, seed: u64) -> Gaussians {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let pts: Vec<[f32; 3]> = scene
+        .gt
+        .means
+        .iter()
+        .map(|m| std::array::from_fn(|i| m[i] + jitter * (rng.random::<f32>() * 2.0 - 1.0)))
+        .collect();
+    let cols = vec![[0.5f32; 3]; pts.len()];
+    gems_train::init::from_points(
+        &pts,
+        &cols,
+        &gems_train::config::InitConfig::default(),
+        3,
+        &mut rng,
+    )
+    .unwrap()
+}
