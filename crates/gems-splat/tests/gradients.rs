@@ -2,6 +2,8 @@
 //! included (rotation perturbed through the exponential map), in classic and antialiased mode;
 //! and the fast path against the reference on random scenes.
 
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use common::*;

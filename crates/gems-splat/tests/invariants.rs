@@ -1,6 +1,8 @@
 //! Rendering invariants: empty scenes, hidden and transparent Gaussians, thread-count
 //! independence, hostile inputs, input validation.
 
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use common::*;

@@ -1,6 +1,8 @@
 //! Parity with gsplat 1.5.3 (f64 reference vectors in shared/testdata/splat): forward outputs,
 //! radii/culling and every gradient, for the fast renderer and the f64 reference.
 
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use common::*;

@@ -1,6 +1,8 @@
 //! Inria PLY: round trips at every SH degree, the channel-major f_rest layout, foreign files
 //! with extra properties, and clear errors on malformed files.
 
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use gems_splat::ply::{read_ply, write_ply};
