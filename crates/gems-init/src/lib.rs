@@ -5,4 +5,5 @@
 //! [`sfm::write_outputs`] (COLMAP `sparse/0`, `sfm_report.json`, top-view PNG) and
 //! [`sfm::run_colmap_cli`] (a user-installed COLMAP as a subprocess, for `--init colmap-cli`).
 
+pub mod edi;
 pub mod sfm;
