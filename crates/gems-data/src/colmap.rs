@@ -738,7 +738,7 @@ pub fn parse_images_txt(text: &str) -> std::result::Result<Vec<Image>, FormatErr
             ))
         })?;
         let toks: Vec<&str> = pline.split_whitespace().collect();
-        if toks.len() % 3 != 0 {
+        if !toks.len().is_multiple_of(3) {
             return Err(FormatError::new(format!(
                 "line {pln}: POINTS2D needs triples X Y POINT3D_ID, found {} values",
                 toks.len()
@@ -789,7 +789,7 @@ pub fn parse_points3d_txt(text: &str) -> std::result::Result<Vec<Point3D>, Forma
         ];
         let error = parse_num(t.next(), ln, "error")?;
         let rest: Vec<&str> = t.collect();
-        if rest.len() % 2 != 0 {
+        if !rest.len().is_multiple_of(2) {
             return Err(FormatError::new(format!(
                 "line {ln}: TRACK needs pairs IMAGE_ID POINT2D_IDX"
             )));

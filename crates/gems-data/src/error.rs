@@ -62,6 +62,9 @@ pub enum DataError {
         /// The codec error.
         source: image::ImageError,
     },
+    /// Reading event data failed (the error names the file).
+    #[error(transparent)]
+    Events(gems_events::EventError),
 }
 
 impl DataError {

@@ -1,18 +1,38 @@
 //! The scene data layer of gems: views, splits, intrinsics, poses and sparse models read from the
 //! layouts our users hold (GeMS/BAD-Gaussians/PRISM3D, COLMAP, LLFF, ExBluRF, nerfstudio).
 //!
-//! Conventions used everywhere: poses are **world-to-camera** ([`Pose`]), OpenCV camera axes
-//! (x right, y down, z forward), f64.
+//! # Conventions
+//! Poses are **world-to-camera** ([`Pose`]: `x_cam = R·x_world + t`), OpenCV camera axes (x right,
+//! y down, z forward), f64. Images in memory are [`ImageRgb`]: interleaved RGB `f32` in `[0, 1]`
+//! (sRGB values as stored), row-major. Every error names the file at fault ([`DataError`]);
+//! every writer is atomic (temp file + rename).
+//!
+//! # Entry points
+//! - [`open_scene`] → [`Scene`] (views with split, intrinsics, poses, ground truth, SfM model,
+//!   events) for any supported layout; [`scene_info`] summarises it (serde, for `gems info`).
+//! - [`colmap`]: `read_model` / `write_model` (binary byte-exact, text).
+//! - [`llff`]: `read_poses_bounds` / `write_poses_bounds`, `read_subframes` / `write_subframes`.
+//! - [`nerfstudio`]: `read_transforms` / `write_transforms`.
+//! - [`manifest`]: `gems_scene.json` and the `hold=<n>` marker (for scene generators).
+//! - [`image`]: `load_image`, `save_png`, `downscale_area`, [`ImageCache`].
 
 pub mod colmap;
 pub mod error;
+pub mod events;
 mod fsutil;
 pub mod image;
+pub mod info;
 pub mod llff;
+pub mod manifest;
+pub mod nerfstudio;
 mod npy;
 pub mod pose;
+pub mod scene;
 
 pub use error::{DataError, FormatError, Result};
 pub use fsutil::write_atomic;
 pub use image::{ImageCache, ImageRgb, load_image, save_png};
+pub use info::{SceneInfo, scene_info};
+pub use manifest::{Manifest, ManifestPoses, write_hold_marker, write_manifest};
 pub use pose::{Intrinsics, Pose};
+pub use scene::{Layout, OpenOptions, PoseSource, Scene, Split, View, open_scene};

@@ -240,6 +240,24 @@ impl Intrinsics {
     }
 }
 
+impl From<Pose> for gems_math::Se3 {
+    /// The same world-to-camera transform as a `gems_math::Se3` (`p ↦ R p + t`).
+    fn from(p: Pose) -> Self {
+        gems_math::Se3::from_arrays(&p.rotation, &p.translation)
+    }
+}
+
+impl From<gems_math::Se3> for Pose {
+    /// A world-to-camera `gems_math::Se3` as a plain [`Pose`].
+    fn from(s: gems_math::Se3) -> Self {
+        let (rotation, translation) = s.to_arrays();
+        Pose {
+            rotation,
+            translation,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -295,23 +313,5 @@ mod tests {
         };
         let r = k.resized(50, 20);
         assert_eq!((r.fx, r.fy, r.cx, r.cy), (50.0, 27.5, 25.0, 10.0));
-    }
-}
-
-impl From<Pose> for gems_math::Se3 {
-    /// The same world-to-camera transform as a `gems_math::Se3` (`p ↦ R p + t`).
-    fn from(p: Pose) -> Self {
-        gems_math::Se3::from_arrays(&p.rotation, &p.translation)
-    }
-}
-
-impl From<gems_math::Se3> for Pose {
-    /// A world-to-camera `gems_math::Se3` as a plain [`Pose`].
-    fn from(s: gems_math::Se3) -> Self {
-        let (rotation, translation) = s.to_arrays();
-        Pose {
-            rotation,
-            translation,
-        }
     }
 }

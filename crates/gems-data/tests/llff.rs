@@ -68,7 +68,7 @@ fn hand_written_row_matches_llff_convention() {
     // Build the .npy by hand (NEP-01 v1.0) so the test does not depend on our writer.
     let header = "{'descr': '<f8', 'fortran_order': False, 'shape': (1, 17), }";
     let mut h = header.to_string();
-    while (10 + h.len() + 1) % 64 != 0 {
+    while !(10 + h.len() + 1).is_multiple_of(64) {
         h.push(' ');
     }
     h.push('\n');
@@ -102,7 +102,7 @@ fn float32_files_are_accepted() {
         0.0, 1.0, 0.0, 0.0, 10.0, 1.0, 0.0, 0.0, 0.0, 20.0, 0.0, 0.0, -1.0, 0.0, 30.0, 1.0, 2.0,
     ];
     let mut h = "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 17), }".to_string();
-    while (10 + h.len() + 1) % 64 != 0 {
+    while !(10 + h.len() + 1).is_multiple_of(64) {
         h.push(' ');
     }
     h.push('\n');

@@ -1,0 +1,518 @@
+//! Scene opening on hand-made folders of every layout: splits, ground truth, SfM attachment,
+//! downscaled copies, events, and the errors of malformed folders.
+
+use std::path::Path;
+
+use gems_data::colmap::{self, Camera, CameraModel, Image, ModelFormat, SparseModel};
+use gems_data::llff::{self, LlffRow};
+use gems_data::nerfstudio::{self, CameraSpec, Frame, FrameSplit, Transforms};
+use gems_data::*;
+
+fn write_img(path: &Path, w: u32, h: u32, seed: u32) {
+    let mut img = ImageRgb::new(w, h);
+    for (i, v) in img.data.iter_mut().enumerate() {
+        *v = ((i as u32 * 37 + seed * 11) % 256) as f32 / 255.0;
+    }
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    save_png(path, &img).unwrap();
+}
+
+fn pose(i: usize) -> Pose {
+    let a = 0.1 * i as f64;
+    Pose::from_quaternion(
+        [(a / 2.0).cos(), 0.0, (a / 2.0).sin(), 0.0],
+        [i as f64 * 0.1, 0.0, 1.0],
+    )
+}
+
+fn names(n: usize) -> Vec<String> {
+    (0..n).map(|i| format!("{i:03}.png")).collect()
+}
+
+/// A GeMS-layout scene as `gems synth` writes it: images/, images_test/ (one per image),
+/// hold=<hold>, manifest with ground-truth poses, LLFF GT poses + sub-frames, and a COLMAP model
+/// computed at twice the resolution.
+fn make_gems(root: &Path, n: usize, hold: i64, w: u32, h: u32) {
+    for (i, name) in names(n).iter().enumerate() {
+        write_img(&root.join("images").join(name), w, h, i as u32);
+        write_img(&root.join("images_test").join(name), w, h, 100 + i as u32);
+    }
+    write_hold_marker(root, hold).unwrap();
+    write_manifest(root, &Manifest::ground_truth("test")).unwrap();
+    let rows: Vec<LlffRow> = (0..n)
+        .map(|i| LlffRow::from_pose(&pose(i), h as f64, w as f64, 20.0, 0.1, 10.0))
+        .collect();
+    llff::write_poses_bounds(&root.join("poses_bounds.npy"), &rows).unwrap();
+    let sub: Vec<Vec<LlffRow>> = (0..n)
+        .map(|i| {
+            (0..5)
+                .map(|s| LlffRow::from_pose(&pose(i + s), h as f64, w as f64, 20.0, 0.1, 10.0))
+                .collect()
+        })
+        .collect();
+    llff::write_subframes(&root.join("poses_bounds_subframes.npy"), &sub).unwrap();
+    let model = SparseModel {
+        cameras: vec![Camera {
+            id: 1,
+            model: CameraModel::Pinhole,
+            width: 2 * w as u64,
+            height: 2 * h as u64,
+            params: vec![40.0, 42.0, w as f64, h as f64],
+        }],
+        // SfM estimates differ from ground truth: use pose(i + 1).
+        images: names(n)
+            .iter()
+            .enumerate()
+            .map(|(i, name)| Image::from_pose(i as u32 + 1, 1, name, &pose(i + 1)))
+            .collect(),
+        points: vec![],
+    };
+    colmap::write_model(&root.join("sparse/0"), &model, ModelFormat::Binary).unwrap();
+}
+
+fn close(a: &Pose, b: &Pose) -> bool {
+    a.rotation
+        .iter()
+        .flatten()
+        .zip(b.rotation.iter().flatten())
+        .all(|(x, y)| (x - y).abs() < 1e-9)
+        && a.translation
+            .iter()
+            .zip(&b.translation)
+            .all(|(x, y)| (x - y).abs() < 1e-9)
+}
+
+#[test]
+fn gems_layout_split_ground_truth_and_sfm() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    make_gems(root, 10, 4, 8, 6);
+    let s = open_scene(root, &OpenOptions::default()).unwrap();
+    assert_eq!(s.layout, Layout::Gems);
+    assert_eq!(s.hold, Some(4));
+    assert_eq!(s.pose_source, PoseSource::Sfm);
+    let nvs: Vec<&str> = s.nvs_eval_views().map(|v| v.name.as_str()).collect();
+    assert_eq!(nvs, ["000.png", "004.png", "008.png"]);
+    assert_eq!(s.train_views().count(), 7);
+    assert_eq!(s.deblur_eval_views().count(), 7);
+    let v = &s.views[5];
+    assert_eq!(
+        v.sharp_gt.as_deref(),
+        Some(root.join("images_test/005.png").as_path())
+    );
+    assert!(
+        close(v.pose.as_ref().unwrap(), &pose(6)),
+        "SfM pose by name"
+    );
+    assert!(
+        close(v.gt_pose.as_ref().unwrap(), &pose(5)),
+        "GT pose from poses_bounds"
+    );
+    let sub = v.gt_subframe_poses.as_ref().unwrap();
+    assert_eq!(sub.len(), 5);
+    assert!(close(&sub[4], &pose(9)));
+    // The model was computed at 16×12: intrinsics are rescaled to the 8×6 images.
+    let k = v.intrinsics.unwrap();
+    assert_eq!(
+        (k.fx, k.fy, k.cx, k.cy, k.width, k.height),
+        (20.0, 21.0, 4.0, 3.0, 8, 6)
+    );
+
+    let info = scene_info(&s, true).unwrap();
+    let json = serde_json::to_value(&info).unwrap();
+    for key in [
+        "layout",
+        "views",
+        "train",
+        "eval_deblur",
+        "eval_nvs",
+        "width",
+        "height",
+        "has_gt_poses",
+        "has_sfm",
+        "events",
+    ] {
+        assert!(json.get(key).is_some(), "missing key {key}");
+    }
+    assert_eq!(json["layout"], "gems");
+    assert_eq!(json["views"], 10);
+    assert_eq!(json["eval_nvs"], 3);
+    assert_eq!(json["has_gt_poses"], true);
+    assert_eq!(json["subframes_per_view"], 5);
+    assert!(json["events"].is_null());
+    let text = info.to_string();
+    assert!(
+        text.contains("10 (7 train, 7 deblur-eval, 3 novel-view eval"),
+        "{text}"
+    );
+}
+
+#[test]
+fn hold_option_and_no_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    make_gems(dir.path(), 6, 4, 8, 6);
+    let opts = OpenOptions {
+        hold: Some(0),
+        ..OpenOptions::default()
+    };
+    let s = open_scene(dir.path(), &opts).unwrap();
+    assert_eq!(s.hold, None);
+    assert_eq!(s.deblur_eval_views().count(), 6);
+    assert_eq!(s.nvs_eval_views().count(), 0);
+}
+
+#[test]
+fn bad_gaussians_style_sharp_per_training_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    make_gems(root, 9, 4, 8, 6);
+    // Keep only the 6 sharp images of training views (indices 1,2,3,5,6,7), renamed BAD-style.
+    std::fs::remove_dir_all(root.join("images_test")).unwrap();
+    for (k, i) in [1, 2, 3, 5, 6, 7].iter().enumerate() {
+        write_img(
+            &root.join(format!("images_test/img_test_{k:03}.png")),
+            8,
+            6,
+            200 + *i,
+        );
+    }
+    let s = open_scene(root, &OpenOptions::default()).unwrap();
+    assert_eq!(s.deblur_eval_views().count(), 6);
+    assert_eq!(s.nvs_eval_views().count(), 0);
+    assert_eq!(
+        s.views[5].sharp_gt.as_deref(),
+        Some(root.join("images_test/img_test_003.png").as_path())
+    );
+    // A count matching neither rule is an error naming images_test.
+    std::fs::remove_file(root.join("images_test/img_test_000.png")).unwrap();
+    let e = open_scene(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("images_test") && e.contains("neither matches"),
+        "{e}"
+    );
+}
+
+#[test]
+fn downscaled_copies_are_made_and_never_overwritten() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    make_gems(root, 4, 8, 9, 6);
+    // A pre-existing downscaled file with different content must survive.
+    write_img(&root.join("images_2/001.png"), 4, 3, 999);
+    let before = std::fs::read(root.join("images_2/001.png")).unwrap();
+    let opts = OpenOptions {
+        downscale: 2,
+        ..OpenOptions::default()
+    };
+    let s = open_scene(root, &opts).unwrap();
+    assert_eq!(
+        std::fs::read(root.join("images_2/001.png")).unwrap(),
+        before
+    );
+    assert_eq!(
+        (s.views[0].width, s.views[0].height),
+        (4, 3),
+        "floor(9/2) x 6/2"
+    );
+    assert!(s.views[0].image.starts_with(root.join("images_2")));
+    assert!(
+        s.views[2]
+            .sharp_gt
+            .as_ref()
+            .unwrap()
+            .starts_with(root.join("images_test_2"))
+    );
+    // Area filter: the copy equals the area-filtered full image (8-bit rounding aside).
+    let full = load_image(&root.join("images/002.png")).unwrap();
+    let small = load_image(&root.join("images_2/002.png")).unwrap();
+    let expect = gems_data::image::downscale_area(&full, 4, 3);
+    for (a, b) in small.data.iter().zip(&expect.data) {
+        assert!((a - b).abs() <= 0.5 / 255.0 + 1e-6);
+    }
+    // Intrinsics: camera at 18×12 → 4×3 per axis.
+    let k = s.views[0].intrinsics.unwrap();
+    assert!((k.fx - 40.0 * 4.0 / 18.0).abs() < 1e-12 && (k.fy - 42.0 * 3.0 / 12.0).abs() < 1e-12);
+    // Without permission to create, a missing folder is an error.
+    let opts = OpenOptions {
+        downscale: 3,
+        create_downscaled: false,
+        ..OpenOptions::default()
+    };
+    let e = open_scene(root, &opts).unwrap_err().to_string();
+    assert!(e.contains("images_3"), "{e}");
+}
+
+#[test]
+fn llff_layout_interleaves_sharp_test_views() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let n = 9;
+    for (i, name) in names(n).iter().enumerate() {
+        write_img(&root.join("images").join(name), 10, 8, i as u32);
+    }
+    let rows: Vec<LlffRow> = (0..n)
+        .map(|i| LlffRow::from_pose(&pose(i), 16.0, 20.0, 30.0, 0.1, 5.0))
+        .collect();
+    llff::write_poses_bounds(&root.join("poses_bounds.npy"), &rows).unwrap();
+    // ExBluRF sub-frames for the training views only.
+    let sub: Vec<Vec<LlffRow>> = (0..6).map(|i| vec![rows[i]; 3]).collect();
+    llff::write_subframes(&root.join("poses_bounds_subframes.npy"), &sub).unwrap();
+    let opts = OpenOptions {
+        hold: Some(3),
+        ..OpenOptions::default()
+    };
+    let s = open_scene(root, &opts).unwrap();
+    assert_eq!(s.layout, Layout::Llff);
+    assert_eq!(s.pose_source, PoseSource::Llff);
+    let nvs: Vec<usize> = s
+        .views
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.split == Split::NovelView)
+        .map(|(i, _)| i)
+        .collect();
+    assert_eq!(nvs, [0, 3, 6]);
+    assert_eq!(s.views[3].sharp_gt.as_ref(), Some(&s.views[3].image));
+    assert_eq!(s.deblur_eval_views().count(), 0);
+    assert!(close(s.views[4].pose.as_ref().unwrap(), &pose(4)));
+    let k = s.views[4].intrinsics.unwrap();
+    assert_eq!(
+        (k.fx, k.cx, k.cy, k.width),
+        (15.0, 5.0, 4.0, 10),
+        "hwf 16x20 f30 scaled to 10x8"
+    );
+    assert!(s.views[0].gt_subframe_poses.is_none());
+    assert_eq!(s.views[1].gt_subframe_poses.as_ref().unwrap().len(), 3);
+    // Wrong number of poses names the file.
+    llff::write_poses_bounds(&root.join("poses_bounds.npy"), &rows[..5]).unwrap();
+    let e = open_scene(root, &opts).unwrap_err().to_string();
+    assert!(
+        e.contains("poses_bounds.npy") && e.contains("5 poses"),
+        "{e}"
+    );
+}
+
+#[test]
+fn nerfstudio_round_trip_and_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let k = Intrinsics {
+        fx: 50.0,
+        fy: 51.0,
+        cx: 6.0,
+        cy: 4.0,
+        width: 12,
+        height: 8,
+    };
+    let frames: Vec<Frame> = (0..4)
+        .map(|i| Frame {
+            file_path: format!("images/{i:03}.png"),
+            pose: pose(i),
+            camera: CameraSpec::Pinhole(k),
+            split: Some(if i == 2 {
+                FrameSplit::Eval
+            } else {
+                FrameSplit::Train
+            }),
+        })
+        .collect();
+    for f in &frames {
+        write_img(&root.join(&f.file_path), 12, 8, 1);
+    }
+    let t = Transforms { frames };
+    nerfstudio::write_transforms(&root.join("transforms.json"), &t).unwrap();
+    let back = nerfstudio::read_transforms(&root.join("transforms.json")).unwrap();
+    assert_eq!(back.frames.len(), 4);
+    for (a, b) in back.frames.iter().zip(&t.frames) {
+        assert_eq!(
+            (a.file_path.as_str(), a.camera, a.split),
+            (b.file_path.as_str(), b.camera, b.split)
+        );
+        assert!(close(&a.pose, &b.pose));
+    }
+    let s = open_scene(root, &OpenOptions::default()).unwrap();
+    assert_eq!(s.layout, Layout::Nerfstudio);
+    assert_eq!(s.views[2].split, Split::NovelView);
+    assert_eq!(s.views[1].intrinsics, Some(k));
+    assert!(close(s.views[3].pose.as_ref().unwrap(), &pose(3)));
+}
+
+/// OpenGL c2w convention on a hand-written matrix: identity in OpenGL (camera looking down −z,
+/// y up) is an OpenCV camera rotated 180° about x.
+#[test]
+fn nerfstudio_opengl_convention() {
+    let text = r#"{"camera_angle_x": 1.5707963267948966,
+        "frames": [{"file_path": "./train/r_0", "transform_matrix": [[1,0,0,1],[0,1,0,2],[0,0,1,3],[0,0,0,1]]}]}"#;
+    let t = nerfstudio::parse_transforms(text).unwrap();
+    let p = t.frames[0].pose;
+    assert_eq!(p.center(), [1.0, 2.0, 3.0]);
+    // World point 1 unit in front (−z in OpenGL) must have camera z = +1 in OpenCV.
+    let c = p.transform_point([1.0, 2.0, 2.0]);
+    assert!(
+        (c[2] - 1.0).abs() < 1e-12 && c[0].abs() < 1e-12 && c[1].abs() < 1e-12,
+        "{c:?}"
+    );
+    // A world point above the camera (+y) is at negative OpenCV y (image up).
+    assert!(p.transform_point([1.0, 3.0, 2.0])[1] < 0.0);
+    let k = t.frames[0].camera.resolve(100, 80);
+    assert!((k.fx - 50.0).abs() < 1e-9 && k.cx == 50.0 && k.cy == 40.0);
+    // Blender paths omit ".png"; the scene resolves them.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("transforms.json"), text).unwrap();
+    write_img(&dir.path().join("train/r_0.png"), 10, 10, 0);
+    let s = open_scene(dir.path(), &OpenOptions::default()).unwrap();
+    assert!((s.views[0].intrinsics.unwrap().fx - 5.0).abs() < 1e-12);
+}
+
+#[test]
+fn nerfstudio_errors_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("transforms.json");
+    let cases = [
+        (
+            r#"{"fl_x": 1, "w": 2, "h": 2, "k1": 0.2, "frames": []}"#,
+            "distortion",
+        ),
+        (
+            r#"{"fl_x": 1, "w": 2, "h": 2, "frames": [{"file_path": "a.png", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0]]}]}"#,
+            "",
+        ),
+        (
+            r#"{"frames": [{"file_path": "a.png", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]}"#,
+            "no intrinsics",
+        ),
+        (
+            r#"{"fl_x": 1, "w": 2, "h": 2, "frames": [{"file_path": "a.png", "transform_matrix": [[2,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]}"#,
+            "rigid",
+        ),
+        (
+            r#"{"camera_model": "EQUIRECTANGULAR", "frames": []}"#,
+            "EQUIRECTANGULAR",
+        ),
+        ("{not json", "invalid JSON"),
+    ];
+    for (text, needle) in cases {
+        std::fs::write(&p, text).unwrap();
+        let e = open_scene(dir.path(), &OpenOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("transforms.json") || e.contains("a.png"), "{e}");
+        assert!(e.contains(needle), "{e} should contain {needle}");
+    }
+}
+
+#[test]
+fn malformed_scenes_give_one_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    // Not a scene.
+    let e = open_scene(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("images"), "{e}");
+    let e = open_scene(&root.join("nope"), &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("nope"), "{e}");
+    // Distorted camera.
+    make_gems(root, 3, 8, 8, 6);
+    let mut m = colmap::read_model(&root.join("sparse/0")).unwrap();
+    m.cameras[0] = Camera {
+        id: 1,
+        model: CameraModel::Opencv,
+        width: 8,
+        height: 6,
+        params: vec![4.0, 4.0, 4.0, 3.0, 0.1, 0.0, 0.0, 0.0],
+    };
+    colmap::write_model(&root.join("sparse/0"), &m, ModelFormat::Binary).unwrap();
+    let e = open_scene(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cameras.bin") && e.contains("distortion"), "{e}");
+    // Corrupt image.
+    make_gems(root, 3, 8, 8, 6);
+    std::fs::write(root.join("images/001.png"), b"garbage").unwrap();
+    let e = open_scene(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("001.png"), "{e}");
+    // Sharp image of the wrong size.
+    make_gems(root, 3, 8, 8, 6);
+    write_img(&root.join("images_test/002.png"), 7, 6, 0);
+    let e = open_scene(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("002.png") && e.contains("7x6"), "{e}");
+    // Sub-frame count mismatch.
+    make_gems(root, 3, 8, 8, 6);
+    llff::write_subframes(
+        &root.join("poses_bounds_subframes.npy"),
+        &[vec![LlffRow::from_pose(&pose(0), 6.0, 8.0, 1.0, 0.1, 1.0)]],
+    )
+    .unwrap();
+    let e = open_scene(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("poses_bounds_subframes.npy"), "{e}");
+}
+
+#[test]
+fn events_and_exposure_windows() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    make_gems(root, 3, 8, 8, 6);
+    let t: Vec<i64> = (0..100).map(|i| i * 10).collect();
+    let ev = gems_events::EventStream::from_columns(
+        8,
+        6,
+        t,
+        (0..100).map(|i| (i % 8) as u16).collect(),
+        (0..100).map(|i| (i % 6) as u16).collect(),
+        (0..100).map(|i| if i % 2 == 0 { 1 } else { -1 }).collect(),
+    )
+    .unwrap();
+    std::fs::create_dir_all(root.join("events")).unwrap();
+    gems_events::write_events_npz(&root.join("events/events.npz"), &ev).unwrap();
+    std::fs::write(root.join("events/exposure_start_ts.txt"), "0\n300\n600\n").unwrap();
+    std::fs::write(root.join("events/exposure_end_ts.txt"), "99\n450\n990\n").unwrap();
+    let s = open_scene(root, &OpenOptions::default()).unwrap();
+    assert_eq!(s.views[1].exposure.unwrap().start, 300);
+    let info = scene_info(&s, true).unwrap();
+    let e = info.events.as_ref().unwrap();
+    assert_eq!(e.count, Some(100));
+    assert_eq!(e.time_span_us, Some((0, 990)));
+    let counts: Vec<Option<usize>> = e.windows.iter().map(|w| w.events).collect();
+    assert_eq!(counts, [Some(10), Some(16), Some(40)]);
+    let text = info.to_string();
+    assert!(
+        text.contains("100 events") && text.contains("exposures  3 windows"),
+        "{text}"
+    );
+    // Without reading, the files are still reported.
+    let quick = scene_info(&s, false).unwrap();
+    assert_eq!(quick.events.unwrap().count, None);
+    // Window count mismatch names the file.
+    std::fs::write(root.join("events/exposure_start_ts.txt"), "0\n300\n").unwrap();
+    std::fs::write(root.join("events/exposure_end_ts.txt"), "99\n450\n").unwrap();
+    let e = open_scene(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("exposure_start_ts.txt") && e.contains("2 exposure windows"),
+        "{e}"
+    );
+}
+
+#[test]
+fn torch_bins_are_reported_with_conversion_hint() {
+    let dir = tempfile::tempdir().unwrap();
+    make_gems(dir.path(), 2, 8, 8, 6);
+    std::fs::write(dir.path().join("events_bins_13.pt"), b"PK").unwrap();
+    let s = open_scene(dir.path(), &OpenOptions::default()).unwrap();
+    let info = scene_info(&s, true).unwrap();
+    let e = info.events.unwrap();
+    assert!(e.bin_counts.unwrap().ends_with("events_bins_13.pt"));
+    assert!(e.notes[0].contains("numpy.save"), "{:?}", e.notes);
+}
