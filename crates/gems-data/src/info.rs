@@ -66,6 +66,13 @@ pub struct SceneInfo {
     pub view_list: Vec<ViewSummary>,
 }
 
+impl SceneInfo {
+    /// Pretty-printed JSON (the machine-readable form of `gems info --json`).
+    pub fn to_json_pretty(&self) -> String {
+        serde_json::to_string_pretty(self).expect("SceneInfo contains only serialisable data")
+    }
+}
+
 /// Size of the SfM model.
 #[derive(Debug, Clone, Serialize)]
 pub struct SfmSummary {

@@ -72,6 +72,21 @@ impl Layout {
     }
 }
 
+impl std::str::FromStr for Layout {
+    type Err = String;
+    /// Parses `gems`, `llff` or `nerfstudio` (as accepted by `gems info --layout`).
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "gems" | "bad" | "prism3d" => Ok(Layout::Gems),
+            "llff" | "exblurf" | "deblurnerf" => Ok(Layout::Llff),
+            "nerfstudio" => Ok(Layout::Nerfstudio),
+            other => Err(format!(
+                "unknown layout {other:?} (expected gems, llff or nerfstudio)"
+            )),
+        }
+    }
+}
+
 /// Which split a view belongs to. Deblur evaluation uses the training views that have a sharp
 /// ground truth ([`View::sharp_gt`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -254,7 +269,7 @@ pub fn open_scene(root: &Path, opts: &OpenOptions) -> Result<Scene> {
         }
     }
     scene.events = events;
-    tracing::info!(
+    tracing::debug!(
         root = %root.display(),
         layout = ?scene.layout,
         views = scene.views.len(),
