@@ -199,8 +199,9 @@ impl Camera {
             (n > 1e-12 && n.is_finite()).then(|| [a[0] / n, a[1] / n, a[2] / n])
         };
         let z = normalize(sub(target, position))?;
-        // OpenCV: y points down, so x = y × z with y = −up projected.
-        let x = normalize(cross(z, up).map(|v| -v))?;
+        // OpenCV (x right, y down, z forward, x × y = z): x = z × up makes y = z × x the
+        // component of −up orthogonal to z.
+        let x = normalize(cross(z, up))?;
         let y = cross(z, x);
         let rotation = [x, y, z];
         let mut translation = [0.0f32; 3];

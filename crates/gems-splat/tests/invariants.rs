@@ -255,3 +255,73 @@ proptest! {
         prop_assert!(gr.cam_rotation.iter().flatten().flatten().all(|v| v.is_finite()));
     }
 }
+
+#[test]
+fn look_at_centres_the_target_and_keeps_up_up() {
+    let cam = gems_splat::Camera::look_at(
+        100.0,
+        100.0,
+        40.0,
+        30.0,
+        80,
+        60,
+        [1.0, -2.0, -3.0],
+        [0.2, 0.1, 0.3],
+        [0.0, -1.0, 0.0],
+    )
+    .unwrap();
+    let project = |p: [f32; 3]| {
+        let r = cam.rotation;
+        let pc: Vec<f32> = (0..3)
+            .map(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + cam.translation[i])
+            .collect();
+        (
+            cam.fx * pc[0] / pc[2] + cam.cx,
+            cam.fy * pc[1] / pc[2] + cam.cy,
+            pc[2],
+        )
+    };
+    let (u, v, z) = project([0.2, 0.1, 0.3]);
+    assert!((u - 40.0).abs() < 1e-3 && (v - 30.0).abs() < 1e-3 && z > 0.0);
+    // A point displaced along "up" appears higher (smaller v).
+    let (_, v_up, _) = project([0.2, 0.0, 0.3]);
+    assert!(v_up < v);
+    let c = cam.center();
+    assert!((c[0] - 1.0).abs() < 1e-5 && (c[1] + 2.0).abs() < 1e-5 && (c[2] + 3.0).abs() < 1e-5);
+    assert!(
+        gems_splat::Camera::look_at(
+            1.0,
+            1.0,
+            0.0,
+            0.0,
+            4,
+            4,
+            [0.0; 3],
+            [0.0; 3],
+            [0.0, 1.0, 0.0]
+        )
+        .is_none()
+    );
+}
+
+#[test]
+fn png_matches_the_render() {
+    let (g, cams, bgs) = random_scene(21, 200, 2, 31, 23, 2, (-3.0, -2.0));
+    let mut r = Renderer::new();
+    let out = r
+        .forward(&g, &cams, &bgs, &RenderSettings::default())
+        .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("view.png");
+    gems_splat::write_png(&path, &out, 1).unwrap();
+    let img = image::open(&path).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (31, 23));
+    for (x, y, p) in img.enumerate_pixels() {
+        for ch in 0..3 {
+            let k = ((23 + y as usize) * 31 + x as usize) * 3 + ch;
+            let want = (out.rgb[k].clamp(0.0, 1.0) * 255.0).round() as u8;
+            assert_eq!(p[ch], want);
+        }
+    }
+    assert!(gems_splat::write_png(dir.path().join("x.png"), &out, 2).is_err());
+}
