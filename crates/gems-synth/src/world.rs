@@ -26,7 +26,7 @@ impl Material {
     pub fn albedo(&self, p: V3) -> V3 {
         let m = self.pattern.eval(p, self.seed);
         let base = self.colour_a * (1.0 - m) + self.colour_b * m;
-        let detail = fbm(p * (1.0 / self.detail_size), 4, self.seed ^ 0xa511_e9b3);
+        let detail = fbm(p * (1.0 / self.detail_size), 3, self.seed ^ 0xa511_e9b3);
         base * (0.55 + 0.9 * detail)
     }
 }

@@ -85,10 +85,15 @@ fn writes_the_gems_layout_readable_by_gems_data_and_gems_events() {
     let rows = gems_data::llff::read_poses_bounds(&out.join("poses_bounds.npy")).unwrap();
     assert_eq!(rows.len(), cfg.views);
     for (row, truth) in rows.iter().zip(&scene.views) {
-        let c = row.pose().center();
-        for a in 0..3 {
-            assert!((c[a] - truth.mid.centre[a]).abs() < 1e-9);
-        }
+        // The written pose is the ground-truth mid-exposure pose (rotation and centre).
+        let (c, r) = (row.pose().center(), row.pose().rotation_c2w());
+        assert!(
+            c.iter()
+                .zip(truth.mid.centre)
+                .all(|(a, b)| (a - b).abs() < 1e-9)
+        );
+        let r_err = r.iter().flatten().zip(truth.mid.rotation.iter().flatten());
+        assert!(r_err.map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) < 1e-9);
         assert_eq!(
             (row.height(), row.width()),
             (f64::from(cfg.height), f64::from(cfg.width))
