@@ -6,6 +6,7 @@ use gems_data::colmap::{
     Camera, CameraModel, ModelFormat, Point2D, Point3D, SparseModel, write_model,
 };
 use gems_data::llff::{LlffRow, write_poses_bounds, write_subframes};
+use gems_data::{Manifest, write_hold_marker, write_manifest};
 use gems_events::{EventStream, write_events_npz};
 use serde::Serialize;
 
@@ -47,7 +48,8 @@ pub fn image_name(i: usize, views: usize) -> String {
 /// end, so `out_dir` never holds a half-written scene.
 ///
 /// Layout: `images/` (blurry PNGs), `images_test/` (sharp mid-exposure PNGs, one per image),
-/// `hold=<n>`, `poses_bounds.npy` (N×17 ground-truth mid-exposure poses, LLFF convention),
+/// `hold=<n>`, `gems_scene.json` (gems-data manifest declaring the poses ground truth),
+/// `poses_bounds.npy` (N×17 ground-truth mid-exposure poses, LLFF convention),
 /// `poses_bounds_subframes.npy` (N×S×17 sub-frame poses), `gt/sparse/0/` (binary COLMAP model
 /// of the ground-truth cameras and surface points; deliberately *not* `sparse/0`, which SfM must
 /// estimate), `synth.json` (config and summary) and, with events, `events.npz` (t µs, x, y, p ±1)
@@ -251,7 +253,19 @@ fn write_scene(
         write_png(&dir.join("images").join(&name), &r.blurry)?;
         write_png(&dir.join("images_test").join(&name), &r.sharp)?;
     }
-    write_text(&dir.join(format!("hold={}", cfg.hold)), "")?;
+    write_hold_marker(dir, i64::from(cfg.hold))?;
+    let manifest = Manifest {
+        description: Some(format!(
+            "{}x{}, {n} views, {:.1} px blur, {} sub-frames, seed {}",
+            k.width,
+            k.height,
+            cfg.blur_px,
+            subframe_poses.first().map_or(0, Vec::len),
+            cfg.seed
+        )),
+        ..Manifest::ground_truth(concat!("gems synth ", env!("CARGO_PKG_VERSION")))
+    };
+    write_manifest(dir, &manifest)?;
 
     let rows: Vec<LlffRow> = scene
         .views
@@ -321,7 +335,7 @@ fn write_scene(
             Vec::new()
         },
     };
-    let manifest = serde_json::json!({
+    let details = serde_json::json!({
         "generator": "gems synth",
         "poses": "ground truth",
         "pose_convention": "poses_bounds.npy: LLFF [down,right,back | centre | h,w,f] + near,far, mid-exposure",

@@ -82,6 +82,31 @@ fn writes_the_gems_layout_readable_by_gems_data_and_gems_events() {
     );
 
     let scene = SynthScene::new(&cfg).unwrap();
+    // gems-data opens it as a GeMS-layout scene with ground-truth poses and no SfM model.
+    let opened = gems_data::open_scene(&out, &gems_data::OpenOptions::default()).unwrap();
+    assert_eq!(opened.views.len(), cfg.views);
+    assert_eq!(opened.hold, Some(8));
+    assert!(opened.sfm.is_none());
+    assert_eq!(opened.nvs_eval_views().count(), 1);
+    assert_eq!(opened.deblur_eval_views().count(), cfg.views - 1);
+    for (v, truth) in opened.views.iter().zip(&scene.views) {
+        let gt = v.gt_pose.expect("ground-truth pose");
+        let c = gt.center();
+        assert!(
+            c.iter()
+                .zip(truth.mid.centre)
+                .all(|(a, b)| (a - b).abs() < 1e-9)
+        );
+        assert_eq!(
+            v.gt_subframe_poses.as_ref().map(Vec::len),
+            Some(cfg.subframes)
+        );
+        assert!(v.sharp_gt.is_some() && v.exposure.is_some());
+        assert_eq!((v.width, v.height), (cfg.width, cfg.height));
+    }
+    let info = gems_data::scene_info(&opened, true).unwrap();
+    assert!(info.has_gt_poses && !info.has_sfm);
+
     let rows = gems_data::llff::read_poses_bounds(&out.join("poses_bounds.npy")).unwrap();
     assert_eq!(rows.len(), cfg.views);
     for (row, truth) in rows.iter().zip(&scene.views) {
