@@ -344,7 +344,7 @@ fn write_scene(
         "summary": &summary,
     });
     let text =
-        serde_json::to_string_pretty(&manifest).map_err(|e| SynthError::Config(e.to_string()))?;
+        serde_json::to_string_pretty(&details).map_err(|e| SynthError::Config(e.to_string()))?;
     write_text(&dir.join("synth.json"), &text)?;
     Ok(summary)
 }
