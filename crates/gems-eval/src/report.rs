@@ -1,0 +1,380 @@
+//! `report.html`: metrics tables, loss/PSNR curves, a trajectory plot (estimated vs ground truth
+//! when known) and a blurry | ours | ground-truth grid. The figures are PNGs drawn with plotters
+//! into a pixel buffer without any text (no font needed); their axes are described in the HTML.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use gems_data::{ImageRgb, save_png};
+use gems_math::{Matrix3, Vector3, umeyama};
+use plotters::prelude::*;
+
+use crate::EvalError;
+use crate::evaluate::{MetricsReport, SplitScores};
+
+/// One row of the comparison grid; images `[H,W,3]`.
+#[derive(Clone, Debug)]
+pub struct GridRow {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub blurry: Vec<f32>,
+    pub ours: Vec<f32>,
+    pub gt: Option<Vec<f32>>,
+}
+
+/// What the report shows.
+#[derive(Clone, Debug)]
+pub struct ReportInput {
+    pub title: String,
+    pub metrics: MetricsReport,
+    /// Per-step training loss and PSNR (of the synthesised blurry image vs the input).
+    pub loss: Vec<f32>,
+    pub psnr: Vec<f32>,
+    /// Per view: the virtual camera centres in exposure order (input frame).
+    pub trajectories: Vec<Vec<[f64; 3]>>,
+    /// Per view: the ground-truth mid-exposure centre when known (input frame).
+    pub gt_centres: Vec<Option<[f64; 3]>>,
+    pub grid: Vec<GridRow>,
+}
+
+const PLOT_W: u32 = 640;
+const PLOT_H: u32 = 320;
+
+fn plot_err(path: &Path, e: impl std::fmt::Display) -> EvalError {
+    EvalError::Plot {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    }
+}
+
+fn save_rgb8(path: &Path, w: u32, h: u32, buf: &[u8]) -> Result<(), EvalError> {
+    let img = ImageRgb {
+        width: w,
+        height: h,
+        data: buf.iter().map(|&b| f32::from(b) / 255.0).collect(),
+    };
+    save_png(path, &img)?;
+    Ok(())
+}
+
+fn finite_range(vals: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    let (lo, hi) = vals
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    if lo > hi {
+        return None;
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-9);
+    Some((lo - pad, hi + pad))
+}
+
+/// A curve (light raw values, dark 50-step moving average). Returns the y range drawn.
+fn plot_curve(path: &Path, values: &[f32]) -> Result<Option<(f64, f64)>, EvalError> {
+    let Some((y0, y1)) = finite_range(values.iter().map(|&v| f64::from(v))) else {
+        return Ok(None);
+    };
+    let mut buf = vec![0u8; (PLOT_W * PLOT_H * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (PLOT_W, PLOT_H)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
+        let x1 = values.len().max(2) as f64;
+        let mut chart = ChartBuilder::on(&root)
+            .margin(10)
+            .build_cartesian_2d(0.0..x1, y0..y1)
+            .map_err(|e| plot_err(path, e))?;
+        let raw = values
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.is_finite())
+            .map(|(i, &v)| (i as f64, f64::from(v)));
+        chart
+            .draw_series(LineSeries::new(raw, RGBColor(170, 190, 230)))
+            .map_err(|e| plot_err(path, e))?;
+        let win = 50usize;
+        let mut avg = Vec::with_capacity(values.len());
+        let mut sum = 0.0f64;
+        let mut count = 0usize;
+        for (i, &v) in values.iter().enumerate() {
+            if v.is_finite() {
+                sum += f64::from(v);
+                count += 1;
+            }
+            if i >= win && values[i - win].is_finite() {
+                sum -= f64::from(values[i - win]);
+                count -= 1;
+            }
+            if count > 0 {
+                avg.push((i as f64, sum / count as f64));
+            }
+        }
+        chart
+            .draw_series(LineSeries::new(avg, RGBColor(20, 60, 160).stroke_width(2)))
+            .map_err(|e| plot_err(path, e))?;
+        root.present().map_err(|e| plot_err(path, e))?;
+    }
+    save_rgb8(path, PLOT_W, PLOT_H, &buf)?;
+    Ok(Some((y0, y1)))
+}
+
+/// Top view of the trajectories on the two principal axes of all centres. The estimate is
+/// Sim(3)-aligned to the ground truth first when at least three views have it.
+fn plot_trajectories(path: &Path, input: &ReportInput) -> Result<bool, EvalError> {
+    let mids: Vec<[f64; 3]> = input
+        .trajectories
+        .iter()
+        .filter_map(|t| t.get(t.len() / 2).copied())
+        .collect();
+    let pairs: Vec<([f64; 3], [f64; 3])> = input
+        .trajectories
+        .iter()
+        .zip(&input.gt_centres)
+        .filter_map(|(t, g)| Some((*t.get(t.len() / 2)?, (*g)?)))
+        .collect();
+    let (est_m, gt_m): (Vec<_>, Vec<_>) = pairs.iter().copied().unzip();
+    let align = if est_m.len() >= 3 {
+        umeyama(&est_m, &gt_m, true).ok()
+    } else {
+        None
+    };
+    let map = |p: &[f64; 3]| align.map_or(*p, |s| s.act(p));
+    let est: Vec<Vec<[f64; 3]>> = input
+        .trajectories
+        .iter()
+        .map(|t| t.iter().map(map).collect())
+        .collect();
+    let gt: Vec<[f64; 3]> = input.gt_centres.iter().flatten().copied().collect();
+    let all: Vec<Vector3<f64>> = est
+        .iter()
+        .flatten()
+        .chain(&gt)
+        .map(|p| Vector3::from(*p))
+        .collect();
+    if all.is_empty() || mids.is_empty() {
+        return Ok(false);
+    }
+    let mean = all.iter().sum::<Vector3<f64>>() / all.len() as f64;
+    let cov = all.iter().fold(Matrix3::zeros(), |c, p| {
+        c + (p - mean) * (p - mean).transpose()
+    });
+    let eig = cov.symmetric_eigen();
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let (ax, ay) = (
+        eig.eigenvectors.column(order[0]).into_owned(),
+        eig.eigenvectors.column(order[1]).into_owned(),
+    );
+    let proj = |p: &[f64; 3]| {
+        let d = Vector3::from(*p) - mean;
+        (d.dot(&ax), d.dot(&ay))
+    };
+    let pts: Vec<(f64, f64)> = all.iter().map(|p| proj(&[p.x, p.y, p.z])).collect();
+    let (Some((x0, x1)), Some((y0, y1))) = (
+        finite_range(pts.iter().map(|p| p.0)),
+        finite_range(pts.iter().map(|p| p.1)),
+    ) else {
+        return Ok(false);
+    };
+    // Equal scale on both axes so the plot is not distorted.
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    let half = ((x1 - x0) / 2.0).max((y1 - y0) / 2.0 * f64::from(PLOT_W) / f64::from(PLOT_H));
+    let half_y = half * f64::from(PLOT_H) / f64::from(PLOT_W);
+    let mut buf = vec![0u8; (PLOT_W * PLOT_H * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (PLOT_W, PLOT_H)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
+        let mut chart = ChartBuilder::on(&root)
+            .margin(10)
+            .build_cartesian_2d(cx - half..cx + half, cy - half_y..cy + half_y)
+            .map_err(|e| plot_err(path, e))?;
+        for t in &est {
+            chart
+                .draw_series(LineSeries::new(
+                    t.iter().map(proj),
+                    RGBColor(220, 60, 40).stroke_width(2),
+                ))
+                .map_err(|e| plot_err(path, e))?;
+            if let Some(m) = t.get(t.len() / 2) {
+                chart
+                    .draw_series(std::iter::once(Circle::new(
+                        proj(m),
+                        3,
+                        RGBColor(220, 60, 40).filled(),
+                    )))
+                    .map_err(|e| plot_err(path, e))?;
+            }
+        }
+        chart
+            .draw_series(
+                gt.iter()
+                    .map(|g| Circle::new(proj(g), 4, RGBColor(20, 150, 60).stroke_width(2))),
+            )
+            .map_err(|e| plot_err(path, e))?;
+        root.present().map_err(|e| plot_err(path, e))?;
+    }
+    save_rgb8(path, PLOT_W, PLOT_H, &buf)?;
+    Ok(true)
+}
+
+/// Rows of blurry | ours | ground truth separated by white gaps.
+fn compose_grid(rows: &[GridRow]) -> Option<ImageRgb> {
+    let gap = 4u32;
+    let w = rows.iter().map(|r| r.width).max()?;
+    let total_h: u32 = rows.iter().map(|r| r.height + gap).sum::<u32>() - gap;
+    let total_w = 3 * w + 2 * gap;
+    let mut img = ImageRgb {
+        width: total_w,
+        height: total_h,
+        data: vec![1.0; (total_w * total_h * 3) as usize],
+    };
+    let mut y0 = 0;
+    for r in rows {
+        let panels = [Some(&r.blurry), Some(&r.ours), r.gt.as_ref()];
+        for (p, panel) in panels.iter().enumerate() {
+            let Some(src) = panel else { continue };
+            let x0 = p as u32 * (w + gap);
+            for y in 0..r.height {
+                let s = (y * r.width * 3) as usize;
+                let d = (((y0 + y) * total_w + x0) * 3) as usize;
+                let n = (r.width * 3) as usize;
+                for (dv, sv) in img.data[d..d + n].iter_mut().zip(&src[s..s + n]) {
+                    *dv = sv.clamp(0.0, 1.0);
+                }
+            }
+        }
+        y0 += r.height + gap;
+    }
+    Some(img)
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn lpips_cell(v: Option<f64>) -> String {
+    v.map_or_else(|| "—".to_string(), |x| format!("{x:.4}"))
+}
+
+fn split_table(html: &mut String, title: &str, s: &Option<SplitScores>) {
+    let _ = writeln!(html, "<h3>{}</h3>", esc(title));
+    let Some(s) = s else {
+        html.push_str("<p>No views with ground truth in this split.</p>\n");
+        return;
+    };
+    let _ = writeln!(
+        html,
+        "<p>Mean over {} images: PSNR {:.2} dB, SSIM {:.4}, LPIPS {}</p>",
+        s.per_image.len(),
+        s.psnr,
+        s.ssim,
+        lpips_cell(s.lpips)
+    );
+    html.push_str("<table><tr><th>image</th><th>PSNR</th><th>SSIM</th><th>LPIPS</th></tr>\n");
+    for im in &s.per_image {
+        let _ = writeln!(
+            html,
+            "<tr><td>{}</td><td>{:.2}</td><td>{:.4}</td><td>{}</td></tr>",
+            esc(&im.name),
+            im.psnr,
+            im.ssim,
+            lpips_cell(im.lpips)
+        );
+    }
+    html.push_str("</table>\n");
+}
+
+/// Writes `report.html` and its figures under `dir/report/`; returns the HTML path.
+pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalError> {
+    let fig_dir = dir.join("report");
+    let m = &input.metrics;
+    let mut html = String::new();
+    let _ = write!(
+        html,
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
+         body{{font-family:sans-serif;max-width:1100px;margin:2em auto}}\
+         table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:2px 8px;text-align:right}}\
+         img{{max-width:100%}}</style></head><body>\n<h1>{t}</h1>\n",
+        t = esc(&input.title)
+    );
+    let _ = writeln!(
+        html,
+        "<p>Initialisation: <b>{}</b>. {} steps, {:.1} s, {} Gaussians.</p>",
+        esc(&m.init),
+        m.steps,
+        m.seconds,
+        m.gaussians
+    );
+    if [&m.deblur, &m.nvs, &m.nvs_no_pose_opt]
+        .iter()
+        .any(|s| s.as_ref().is_some_and(|s| s.lpips.is_none()))
+    {
+        html.push_str("<p>LPIPS is absent (—): no LPIPS weights were given.</p>\n");
+    }
+    html.push_str("<h2>Metrics</h2>\n");
+    split_table(
+        &mut html,
+        "Deblurring (training views at trajectory midpoint)",
+        &m.deblur,
+    );
+    split_table(&mut html, "Novel views (test-time pose refinement)", &m.nvs);
+    split_table(
+        &mut html,
+        "Novel views (initial poses, no refinement)",
+        &m.nvs_no_pose_opt,
+    );
+    match &m.ape {
+        Some(a) => {
+            let _ = writeln!(
+                html,
+                "<h3>APE (Sim(3)-aligned midpoint camera centres, ground-truth units)</h3>\
+                 <p>RMSE {:.5}, mean {:.5}, median {:.5}, std {:.5}, max {:.5}</p>",
+                a.rmse, a.mean, a.median, a.std, a.max
+            );
+        }
+        None => html.push_str("<h3>APE</h3><p>Not available (no ground-truth poses).</p>\n"),
+    }
+    html.push_str("<h2>Training curves</h2>\n");
+    for (file, label, values) in [
+        ("loss.png", "Training loss", &input.loss),
+        (
+            "psnr.png",
+            "PSNR of the re-blurred render vs the blurry input (dB)",
+            &input.psnr,
+        ),
+    ] {
+        if let Some((y0, y1)) = plot_curve(&fig_dir.join(file), values)? {
+            let _ = writeln!(
+                html,
+                "<p>{label}: x = step 0…{}, y = {y0:.4}…{y1:.4} (light: per step, dark: 50-step mean).</p>\
+                 <img src=\"report/{file}\">",
+                values.len()
+            );
+        }
+    }
+    if plot_trajectories(&fig_dir.join("trajectory.png"), input)? {
+        html.push_str(
+            "<h2>Trajectories</h2>\n<p>Top view on the two principal axes (equal scale). Red: estimated \
+             exposure trajectories (dot = midpoint); green circles: ground-truth centres (estimate \
+             Sim(3)-aligned to them when known).</p><img src=\"report/trajectory.png\">\n",
+        );
+    }
+    if let Some(grid) = compose_grid(&input.grid) {
+        save_png(&fig_dir.join("grid.png"), &grid)?;
+        let names: Vec<String> = input.grid.iter().map(|r| esc(&r.name)).collect();
+        let _ = writeln!(
+            html,
+            "<h2>Blurry input | ours (trajectory midpoint) | ground truth</h2>\n<p>Rows: {}</p>\
+             <img src=\"report/grid.png\">",
+            names.join(", ")
+        );
+    }
+    html.push_str("</body></html>\n");
+    let path = dir.join("report.html");
+    gems_data::write_atomic(&path, html.as_bytes())?;
+    Ok(path)
+}

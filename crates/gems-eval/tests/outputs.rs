@@ -1,0 +1,218 @@
+//! Scores, metrics.json, TUM files, APE and the HTML report.
+
+mod common;
+
+use gems_eval::tum::{format_tum, read_tum, write_tum};
+use gems_eval::*;
+
+#[test]
+fn scores_and_split_means() {
+    let (h, w) = (20, 24);
+    let a: Vec<f32> = (0..h * w * 3).map(|i| (i % 17) as f32 / 16.0).collect();
+    let mut b = a.clone();
+    b[5] += 0.3;
+    let same = score_image("a", &a, &a, h, w, None).unwrap();
+    assert!(same.psnr.is_infinite() && (same.ssim - 1.0).abs() < 1e-12 && same.lpips.is_none());
+    // Renders are clamped before scoring: overshoot above 1 where the target is 1 costs nothing.
+    let over: Vec<f32> = a.iter().map(|&v| if v == 1.0 { 1.5 } else { v }).collect();
+    assert!(
+        score_image("o", &over, &a, h, w, None)
+            .unwrap()
+            .psnr
+            .is_infinite()
+    );
+    let s1 = score_image("x", &b, &a, h, w, None).unwrap();
+    let mk = |name: &str, psnr: f64, lpips: Option<f64>| ImageScore {
+        name: name.into(),
+        psnr,
+        ssim: 0.5,
+        lpips,
+    };
+    let split =
+        SplitScores::from_images(vec![mk("p", 20.0, Some(0.1)), mk("q", 30.0, Some(0.3))]).unwrap();
+    assert_eq!(split.psnr, 25.0);
+    assert!((split.lpips.unwrap() - 0.2).abs() < 1e-15);
+    let partial =
+        SplitScores::from_images(vec![mk("p", 20.0, Some(0.1)), mk("q", 30.0, None)]).unwrap();
+    assert_eq!(
+        partial.lpips, None,
+        "LPIPS absent as soon as one image lacks it"
+    );
+    assert!(SplitScores::from_images(vec![]).is_none());
+    assert!(s1.psnr > 30.0 && s1.psnr.is_finite());
+}
+
+#[test]
+fn metrics_json_round_trip_and_keys() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = ImageScore {
+        name: "v0".into(),
+        psnr: 25.0,
+        ssim: 0.8,
+        lpips: None,
+    };
+    let report = MetricsReport {
+        deblur: SplitScores::from_images(vec![img.clone()]),
+        nvs: None,
+        nvs_no_pose_opt: SplitScores::from_images(vec![img]),
+        ape: Some(ApeSummary {
+            rmse: 0.1,
+            mean: 0.09,
+            median: 0.08,
+            std: 0.02,
+            max: 0.2,
+        }),
+        steps: 7000,
+        seconds: 12.5,
+        gaussians: 1234,
+        init: "gt-noisy".into(),
+    };
+    let path = dir.path().join("metrics.json");
+    write_metrics_json(&path, &report).unwrap();
+    assert_eq!(read_metrics_json(&path).unwrap(), report);
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    for key in [
+        "deblur",
+        "nvs",
+        "nvs_no_pose_opt",
+        "ape",
+        "steps",
+        "seconds",
+        "gaussians",
+    ] {
+        assert!(v.get(key).is_some(), "missing key {key}");
+    }
+    assert!(v["deblur"]["lpips"].is_null() && v["nvs"].is_null());
+    for key in ["psnr", "ssim", "lpips", "per_image"] {
+        assert!(v["deblur"].get(key).is_some(), "missing deblur.{key}");
+    }
+    for key in ["rmse", "mean", "median", "std", "max"] {
+        assert!(v["ape"][key].is_number(), "missing ape.{key}");
+    }
+    // A broken file gives an error naming it.
+    std::fs::write(&path, "{ not json").unwrap();
+    assert!(
+        read_metrics_json(&path)
+            .unwrap_err()
+            .to_string()
+            .contains("metrics.json")
+    );
+}
+
+#[test]
+fn tum_round_trip() {
+    let poses: Vec<(f64, gems_math::Se3)> = (0..5)
+        .map(|i| {
+            (
+                i as f64 / 4.0,
+                common::perturb(&common::camera(i as f64), [0.1, 0.2, 0.3, 0.1, -0.2, 0.3]),
+            )
+        })
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.txt");
+    write_tum(&path, &poses).unwrap();
+    let back = read_tum(&path).unwrap();
+    assert_eq!(back.len(), 5);
+    for ((ta, a), (tb, b)) in poses.iter().zip(&back) {
+        assert!((ta - tb).abs() < 1e-9);
+        assert!((a.trans - b.trans).norm() < 1e-14 && (a.rot - b.rot).abs().max() < 1e-14);
+    }
+    // tx ty tz qx qy qz qw order: identity pose line.
+    let line = format_tum(&[(0.0, gems_math::Se3::identity())]);
+    let vals: Vec<f64> = line
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert_eq!(vals, vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+    std::fs::write(&path, "0 1 2 3\n").unwrap();
+    let err = read_tum(&path).unwrap_err().to_string();
+    assert!(err.contains("t.txt") && err.contains("line 1"), "{err}");
+}
+
+#[test]
+fn ape_is_invariant_to_similarity() {
+    let gt: Vec<[f64; 3]> = (0..8)
+        .map(|i| common::camera(i as f64 * 0.4).trans.into())
+        .collect();
+    let sim = gems_math::Sim3 {
+        scale: 0.37,
+        rot: gems_math::So3::exp(&gems_math::Vector3::new(0.4, 0.1, -0.7)).0,
+        trans: gems_math::Vector3::new(3.0, -1.0, 2.0),
+    };
+    let est: Vec<[f64; 3]> = gt.iter().map(|p| sim.act(p)).collect();
+    let a = ape_of_centres(&est, &gt).unwrap();
+    assert!(a.rmse < 1e-10 && a.max < 1e-10);
+    let mut noisy = est.clone();
+    noisy[3][0] += 0.37; // 1 GT unit after undoing the scale
+    let b = ape_of_centres(&noisy, &gt).unwrap();
+    assert!(b.max > 0.5 && b.max < 1.0 && b.rmse < b.max);
+}
+
+#[test]
+fn report_writes_html_and_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (16u32, 12u32);
+    let img = |v: f32| vec![v; (w * h * 3) as usize];
+    let metrics = MetricsReport {
+        deblur: SplitScores::from_images(vec![ImageScore {
+            name: "<v0>".into(),
+            psnr: 25.0,
+            ssim: 0.8,
+            lpips: None,
+        }]),
+        nvs: None,
+        nvs_no_pose_opt: None,
+        ape: None,
+        steps: 10,
+        seconds: 1.0,
+        gaussians: 5,
+        init: "gt-noisy (σ 0.01)".into(),
+    };
+    let traj: Vec<Vec<[f64; 3]>> = (0..4)
+        .map(|v| {
+            (0..5)
+                .map(|k| [v as f64 + 0.1 * k as f64, 0.05 * k as f64, v as f64 * 0.3])
+                .collect()
+        })
+        .collect();
+    let input = ReportInput {
+        title: "test".into(),
+        metrics,
+        loss: (0..100).map(|i| 1.0 / (1.0 + i as f32)).collect(),
+        psnr: (0..100).map(|i| 10.0 + i as f32 * 0.1).collect(),
+        gt_centres: traj.iter().map(|t| Some(t[2])).collect(),
+        trajectories: traj,
+        grid: vec![GridRow {
+            name: "v0".into(),
+            width: w,
+            height: h,
+            blurry: img(0.2),
+            ours: img(0.5),
+            gt: Some(img(0.9)),
+        }],
+    };
+    let html_path = write_report(dir.path(), &input).unwrap();
+    let html = std::fs::read_to_string(&html_path).unwrap();
+    assert!(
+        html.contains("&lt;v0&gt;")
+            && html.contains("gt-noisy")
+            && html.contains("LPIPS is absent")
+    );
+    for f in ["loss.png", "psnr.png", "trajectory.png", "grid.png"] {
+        let p = dir.path().join("report").join(f);
+        let im = gems_data::load_image(&p).unwrap();
+        assert!(html.contains(&format!("report/{f}")));
+        // Not blank: some pixels differ from the white background.
+        assert!(im.data.iter().any(|&v| v < 0.9), "{f} is blank");
+    }
+    let grid = gems_data::load_image(&dir.path().join("report/grid.png")).unwrap();
+    assert_eq!((grid.width, grid.height), (3 * w + 8, h));
+    assert!(
+        (grid.pixel(1, 1)[0] - 0.2).abs() < 0.01 && (grid.pixel(w + 5, 1)[0] - 0.5).abs() < 0.01
+    );
+}
