@@ -16,6 +16,8 @@
 //! - **Thresholds** ([`estimate_thresholds`]): when `c` is unknown, a 1-D search on [0.1, 0.5]
 //!   (coarse grid, then golden section) minimising `λ·TV(L) − Σ edge(L)·edge(M)` on the gray
 //!   latent (M = signed event map), per view or over several views; optionally c₊ and c₋ apart.
+//!   This is the published energy; it does **not** recover the threshold on our synthetic data
+//!   (see [`search`](estimate_thresholds) docs) — prefer known thresholds.
 //!
 //! # Values
 //! [`Linearisation`] says how stored values relate to the light the events saw; the same event
@@ -35,7 +37,7 @@ mod search;
 
 pub use core::{Image, PixelEvents, binned_factors, exact_factors, on_off_from_signed};
 pub use scene::{EdiOutput, EdiScene, EdiView, deblur_scene, write_edi_scene};
-pub use search::{SearchConfig, estimate_thresholds, sharpness_energy};
+pub use search::{SearchConfig, estimate_thresholds, event_edges, minimise, sharpness_energy};
 
 /// Errors of the EDI stage.
 #[derive(Debug, thiserror::Error)]
@@ -75,7 +77,7 @@ pub enum Linearisation {
 }
 
 impl Linearisation {
-    fn to_linear(self, v: f32) -> f32 {
+    fn decode(self, v: f32) -> f32 {
         match self {
             Linearisation::Identity | Linearisation::EncodedAverage(_) => v,
             Linearisation::Srgb => {
@@ -88,7 +90,7 @@ impl Linearisation {
             Linearisation::Gamma(g) => v.max(0.0).powf(g),
         }
     }
-    fn from_linear(self, v: f32) -> f32 {
+    fn encode(self, v: f32) -> f32 {
         match self {
             Linearisation::Identity | Linearisation::EncodedAverage(_) => v,
             Linearisation::Srgb => {
@@ -222,7 +224,7 @@ pub fn apply_factors(blurry: &Image, factors: &[f32], cfg: &EdiConfig) -> Image 
                 if g == 1.0 || b >= 1.0 {
                     b
                 } else {
-                    lin.from_linear((lin.to_linear(b) * g).clamp(0.0, upper.max(0.0)))
+                    lin.encode((lin.decode(b) * g).clamp(0.0, upper.max(0.0)))
                         .clamp(0.0, upper)
                 }
             })

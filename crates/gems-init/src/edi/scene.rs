@@ -265,7 +265,7 @@ fn deblur_with_counts(
         if cfg.mode == EdiMode::Exact {
             let k = match cfg.reference {
                 Reference::Start => 0,
-                Reference::Mid => (bins + 1) / 2,
+                Reference::Mid => bins.div_ceil(2),
             };
             frames = vec![frames.swap_remove(k)];
             times = vec![times[k]];
