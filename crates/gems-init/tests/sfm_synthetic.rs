@@ -13,14 +13,26 @@ fn check_level(level: usize, tol: f64) {
     let r = run_sfm(&s.images, &SfmOptions::default()).expect("sfm");
     let poses: Vec<_> = r.views.iter().map(|v| v.pose).collect();
     eprintln!("level {level}: {:?}", r.stats);
-    assert_eq!(r.stats.registered, 12, "unregistered: {:?}", r.stats.unregistered);
+    assert_eq!(
+        r.stats.registered, 12,
+        "unregistered: {:?}",
+        r.stats.unregistered
+    );
     let err = common::aligned_rmse_fraction(&poses, &s.gt);
     eprintln!(
         "level {level}: rmse/extent {err:.4}, focal {:.1} (gt {:.1}), points {}, reproj {:.2}px, {:.1}s",
         r.camera.focal, s.focal, r.stats.points, r.stats.mean_reprojection_error, r.stats.seconds
     );
-    assert!(err < tol, "level {level}: translation RMSE fraction {err} ≥ {tol}");
-    assert!((r.camera.focal / s.focal - 1.0).abs() < 0.15, "focal {} vs {}", r.camera.focal, s.focal);
+    assert!(
+        err < tol,
+        "level {level}: translation RMSE fraction {err} ≥ {tol}"
+    );
+    assert!(
+        (r.camera.focal / s.focal - 1.0).abs() < 0.15,
+        "focal {} vs {}",
+        r.camera.focal,
+        s.focal
+    );
     assert!(r.stats.points >= 100);
     assert!(r.stats.mean_reprojection_error < 3.0);
 }
@@ -58,8 +70,17 @@ fn known_focal_is_kept_and_outputs_are_written() {
         }
     }
     let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("sfm_report.json")).unwrap()).unwrap();
-    for key in ["registered", "total", "points", "mean_reprojection_error", "seconds", "unregistered", "mean_track_length"] {
+        serde_json::from_slice(&std::fs::read(dir.path().join("sfm_report.json")).unwrap())
+            .unwrap();
+    for key in [
+        "registered",
+        "total",
+        "points",
+        "mean_reprojection_error",
+        "seconds",
+        "unregistered",
+        "mean_track_length",
+    ] {
         assert!(report.get(key).is_some(), "missing {key}");
     }
     assert_eq!(report["registered"], 6);
@@ -113,9 +134,15 @@ fn textureless_images_are_a_clear_error() {
         name: n.into(),
         image: image::RgbImage::from_pixel(160, 120, image::Rgb([v, v, v])),
     };
-    let e = run_sfm(&[flat("a.png", 100), flat("b.png", 101)], &SfmOptions::default()).unwrap_err();
+    let e = run_sfm(
+        &[flat("a.png", 100), flat("b.png", 101)],
+        &SfmOptions::default(),
+    )
+    .unwrap_err();
     match e {
-        SfmError::Textureless(names) => assert_eq!(names, vec!["a.png".to_string(), "b.png".to_string()]),
+        SfmError::Textureless(names) => {
+            assert_eq!(names, vec!["a.png".to_string(), "b.png".to_string()])
+        }
         other => panic!("unexpected {other}"),
     }
     // One textureless view among textured ones is reported as unregistered, not an error.
@@ -124,7 +151,10 @@ fn textureless_images_are_a_clear_error() {
     imgs.push(flat("flat.png", 128));
     let r = run_sfm(&imgs, &SfmOptions::default()).unwrap();
     assert!(r.stats.unregistered.contains(&"flat.png".to_string()));
-    assert_eq!(r.stats.registered + r.stats.unregistered.len(), r.stats.total);
+    assert_eq!(
+        r.stats.registered + r.stats.unregistered.len(),
+        r.stats.total
+    );
 }
 
 #[test]
@@ -132,13 +162,21 @@ fn unrelated_images_fail_with_too_few_registered() {
     // Two different noise images share no structure.
     let noise = |seed: u32| {
         image::RgbImage::from_fn(128, 96, |x, y| {
-            let h = (x.wrapping_mul(73856093) ^ y.wrapping_mul(19349663) ^ seed.wrapping_mul(83492791)) % 251;
+            let h =
+                (x.wrapping_mul(73856093) ^ y.wrapping_mul(19349663) ^ seed.wrapping_mul(83492791))
+                    % 251;
             image::Rgb([h as u8, (h * 7 % 251) as u8, (h * 13 % 251) as u8])
         })
     };
     let imgs = vec![
-        SfmImage { name: "n1.png".into(), image: noise(1) },
-        SfmImage { name: "n2.png".into(), image: noise(2) },
+        SfmImage {
+            name: "n1.png".into(),
+            image: noise(1),
+        },
+        SfmImage {
+            name: "n2.png".into(),
+            image: noise(2),
+        },
     ];
     let e = run_sfm(&imgs, &SfmOptions::default()).unwrap_err();
     assert!(matches!(e, SfmError::TooFewRegistered { .. }), "{e}");
@@ -147,8 +185,14 @@ fn unrelated_images_fail_with_too_few_registered() {
 #[test]
 fn mismatched_sizes_are_a_clear_error() {
     let imgs = vec![
-        SfmImage { name: "a.png".into(), image: image::RgbImage::new(64, 48) },
-        SfmImage { name: "b.png".into(), image: image::RgbImage::new(48, 64) },
+        SfmImage {
+            name: "a.png".into(),
+            image: image::RgbImage::new(64, 48),
+        },
+        SfmImage {
+            name: "b.png".into(),
+            image: image::RgbImage::new(48, 64),
+        },
     ];
     let e = run_sfm(&imgs, &SfmOptions::default()).unwrap_err();
     assert!(e.to_string().contains("b.png"), "{e}");

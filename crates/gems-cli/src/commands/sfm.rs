@@ -1,9 +1,81 @@
-//! `gems sfm` (owned by the stage that implements it; replaced when that stage lands).
+//! `gems sfm`: blur-robust structure from motion on a scene's images (gems-init does the work).
+
+use anyhow::Context;
+use gems_init::sfm::{self, ColmapCliOptions, SfmOptions};
+use std::path::PathBuf;
 
 /// Arguments of `gems sfm`.
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Scene folder (with an `images/` folder) or a folder of images.
+    pub scene: PathBuf,
+    /// Output folder: `sparse/0` (COLMAP binary), `sfm_report.json`, `sfm_topview.png`.
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Focal length in pixels when known (held fixed); estimated otherwise.
+    #[arg(long)]
+    pub focal: Option<f64>,
+    /// Long side (px) of the pyramid levels to try, in order (default: 192,128,288).
+    #[arg(long, value_delimiter = ',')]
+    pub working_size: Option<Vec<u32>>,
+    /// Keypoints per image.
+    #[arg(long)]
+    pub max_features: Option<usize>,
+    /// RANSAC seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Run a user-installed COLMAP (feature extractor, exhaustive matcher, mapper) instead and
+    /// import its largest model into `<out>/sparse/0`.
+    #[arg(long)]
+    pub colmap_cli: bool,
+    /// The COLMAP executable for --colmap-cli.
+    #[arg(long, default_value = "colmap")]
+    pub colmap_binary: PathBuf,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`gems sfm` is not available in this build yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.colmap_cli {
+        let img_dir = if args.scene.join("images").is_dir() { args.scene.join("images") } else { args.scene.clone() };
+        let opts = ColmapCliOptions {
+            binary: args.colmap_binary.clone(),
+            focal_px: args.focal,
+            use_gpu: false,
+        };
+        let (model, dir) = sfm::run_colmap_cli(&img_dir, &args.out.join("colmap_work"), &opts)?;
+        gems_data::colmap::write_model(&args.out.join("sparse/0"), &model, gems_data::colmap::ModelFormat::Binary)
+            .context("writing the imported COLMAP model")?;
+        println!(
+            "COLMAP registered {} images, {} points (model {}); written to {}",
+            model.images.len(),
+            model.points.len(),
+            dir.display(),
+            args.out.join("sparse/0").display()
+        );
+        return Ok(());
+    }
+    let images = sfm::load_images(&args.scene)?;
+    let mut opts = SfmOptions {
+        focal_px: args.focal,
+        seed: args.seed,
+        ..SfmOptions::default()
+    };
+    if let Some(ws) = args.working_size {
+        opts.working_sizes = ws;
+    }
+    if let Some(m) = args.max_features {
+        opts.max_features = m;
+    }
+    tracing::info!(images = images.len(), "running structure from motion");
+    let result = sfm::run_sfm(&images, &opts)?;
+    sfm::write_outputs(&result, &args.out)?;
+    let s = &result.stats;
+    println!(
+        "registered {}/{} views, {} points, mean track length {:.2}, reprojection error {:.2} px, focal {:.1} px, {:.1} s",
+        s.registered, s.total, s.points, s.mean_track_length, s.mean_reprojection_error, s.focal, s.seconds
+    );
+    if !s.unregistered.is_empty() {
+        println!("unregistered: {}", s.unregistered.join(", "));
+    }
+    println!("written to {}", args.out.display());
+    Ok(())
 }

@@ -29,7 +29,10 @@ pub struct Intrinsics {
 impl Intrinsics {
     #[inline]
     pub fn project(&self, xc: &Vector3<f64>) -> Vector2<f64> {
-        Vector2::new(self.f * xc.x / xc.z + self.cx, self.f * xc.y / xc.z + self.cy)
+        Vector2::new(
+            self.f * xc.x / xc.z + self.cx,
+            self.f * xc.y / xc.z + self.cy,
+        )
     }
     /// Pixel to normalised image coordinates.
     #[inline]
@@ -93,7 +96,13 @@ struct Lin {
     w: f64,
 }
 
-fn linearise(pose: &Pose, x: &Vector3<f64>, o: &Vector2<f64>, k: &Intrinsics, huber: f64) -> Option<Lin> {
+fn linearise(
+    pose: &Pose,
+    x: &Vector3<f64>,
+    o: &Vector2<f64>,
+    k: &Intrinsics,
+    huber: f64,
+) -> Option<Lin> {
     let rx = pose.r * x;
     let xc = rx + pose.t;
     if xc.z <= 1e-9 {
@@ -104,7 +113,8 @@ fn linearise(pose: &Pose, x: &Vector3<f64>, o: &Vector2<f64>, k: &Intrinsics, hu
     let r = Vector2::new(k.f * xn + k.cx - o.x, k.f * yn + k.cy - o.y);
     let dpi = Matrix2x3::new(k.f * iz, 0.0, -k.f * xn * iz, 0.0, k.f * iz, -k.f * yn * iz);
     let mut jc = SMatrix::<f64, 2, 7>::zeros();
-    jc.fixed_view_mut::<2, 3>(0, 0).copy_from(&(dpi * (-rx.cross_matrix())));
+    jc.fixed_view_mut::<2, 3>(0, 0)
+        .copy_from(&(dpi * (-rx.cross_matrix())));
     jc.fixed_view_mut::<2, 3>(0, 3).copy_from(&dpi);
     jc[(0, 6)] = xn;
     jc[(1, 6)] = yn;
@@ -188,8 +198,12 @@ pub fn bundle_adjust(
         let mut accepted = false;
         for _attempt in 0..8 {
             // Per-point 3×3 blocks with damping; Schur complement into S, b.
-            let chunks: Vec<(DMatrix<f64>, DVector<f64>, Vec<Option<Matrix3<f64>>>, Vec<Vector3<f64>>)> = (0
-                ..npts.div_ceil(CHUNK))
+            let chunks: Vec<(
+                DMatrix<f64>,
+                DVector<f64>,
+                Vec<Option<Matrix3<f64>>>,
+                Vec<Vector3<f64>>,
+            )> = (0..npts.div_ceil(CHUNK))
                 .into_par_iter()
                 .map(|ch| {
                     let mut s = DMatrix::<f64>::zeros(n, n);
@@ -283,7 +297,9 @@ pub fn bundle_adjust(
             let dps: Vec<Vector3<f64>> = (0..npts)
                 .into_par_iter()
                 .map(|p| {
-                    let Some(vi) = vinv[p] else { return Vector3::zeros() };
+                    let Some(vi) = vinv[p] else {
+                        return Vector3::zeros();
+                    };
                     let mut rhs = -gps[p];
                     for &oi in &order[start[p]..start[p + 1]] {
                         let Some(l) = &lins[oi] else { continue };
@@ -308,7 +324,8 @@ pub fn bundle_adjust(
                 np.r = Rotation3::new(w) * np.r;
                 np.t += Vector3::new(dc[col + 3], dc[col + 4], dc[col + 5]);
             }
-            let new_points: Vec<Vector3<f64>> = points.iter().zip(&dps).map(|(x, d)| x + d).collect();
+            let new_points: Vec<Vector3<f64>> =
+                points.iter().zip(&dps).map(|(x, d)| x + d).collect();
             let mut new_k = *k;
             if let Some(fc) = focal_col {
                 new_k.f += dc[fc];
@@ -383,7 +400,11 @@ mod tests {
         for (ci, p) in poses.iter().enumerate() {
             for (pi, x) in pts.iter().enumerate() {
                 let xy = k.project(&p.transform(x));
-                obs.push(Observation { cam: ci, point: pi, xy });
+                obs.push(Observation {
+                    cam: ci,
+                    point: pi,
+                    xy,
+                });
             }
         }
         (poses, pts, obs, k)
@@ -400,7 +421,11 @@ mod tests {
                 rng.random_range(-0.02..0.02),
                 rng.random_range(-0.02..0.02),
             )) * p.r;
-            p.t += Vector3::new(rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1), 0.0);
+            p.t += Vector3::new(
+                rng.random_range(-0.1..0.1),
+                rng.random_range(-0.1..0.1),
+                0.0,
+            );
         }
         // Fix two cameras so that the gauge (including scale) is pinned.
         let mut fixed = vec![false; poses.len()];
@@ -458,7 +483,11 @@ mod tests {
             },
         );
         for (p, g) in poses.iter().zip(&gt_poses) {
-            assert!((p.centre() - g.centre()).norm() < 0.05, "{}", (p.centre() - g.centre()).norm());
+            assert!(
+                (p.centre() - g.centre()).norm() < 0.05,
+                "{}",
+                (p.centre() - g.centre()).norm()
+            );
         }
     }
 
@@ -492,14 +521,20 @@ mod tests {
             };
             let num = (step(1.0) - step(-1.0)) / (2.0 * h);
             let an = l.jc.column(i);
-            assert!((num - an).norm() < 1e-5 * (1.0 + an.norm()), "col {i}: {num} vs {an}");
+            assert!(
+                (num - an).norm() < 1e-5 * (1.0 + an.norm()),
+                "col {i}: {num} vs {an}"
+            );
         }
         for i in 0..3 {
             let mut e = Vector3::zeros();
             e[i] = h;
             let num = (res(&pose, &(x + e), &k) - res(&pose, &(x - e), &k)) / (2.0 * h);
             let an = l.jp.column(i);
-            assert!((num - an).norm() < 1e-5 * (1.0 + an.norm()), "point col {i}");
+            assert!(
+                (num - an).norm() < 1e-5 * (1.0 + an.norm()),
+                "point col {i}"
+            );
         }
     }
 }

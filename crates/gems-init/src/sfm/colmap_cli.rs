@@ -45,15 +45,30 @@ fn run_step(opts: &ColmapCliOptions, args: &[String], work_dir: &Path) -> Result
         // Keeping the log is best effort; the error below carries its tail anyway.
         let _ = std::fs::write(&log, [&out.stdout[..], &out.stderr[..]].concat());
         let stderr = String::from_utf8_lossy(&out.stderr);
-        let tail: String = stderr.lines().rev().take(5).collect::<Vec<_>>().into_iter().rev().collect::<Vec<_>>().join("\n");
-        return Err(SfmError::Colmap(format!("`colmap {}` failed ({}): {tail}", args[0], out.status)));
+        let tail: String = stderr
+            .lines()
+            .rev()
+            .take(5)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+            .collect::<Vec<_>>()
+            .join("\n");
+        return Err(SfmError::Colmap(format!(
+            "`colmap {}` failed ({}): {tail}",
+            args[0], out.status
+        )));
     }
     Ok(())
 }
 
 /// Run COLMAP on the images in `image_dir`, working in `work_dir` (database and models are kept
 /// there for inspection). Returns the model with the most registered images and its folder.
-pub fn run_colmap_cli(image_dir: &Path, work_dir: &Path, opts: &ColmapCliOptions) -> Result<(SparseModel, PathBuf), SfmError> {
+pub fn run_colmap_cli(
+    image_dir: &Path,
+    work_dir: &Path,
+    opts: &ColmapCliOptions,
+) -> Result<(SparseModel, PathBuf), SfmError> {
     std::fs::create_dir_all(work_dir).map_err(|e| SfmError::Write {
         path: work_dir.to_path_buf(),
         source: Box::new(e),
@@ -88,15 +103,33 @@ pub fn run_colmap_cli(image_dir: &Path, work_dir: &Path, opts: &ColmapCliOptions
     if let Some(f) = opts.focal_px {
         let first = first_image_size(image_dir)?;
         fe.push("--ImageReader.camera_params".into());
-        fe.push(format!("{f},{},{}", first.0 as f64 / 2.0, first.1 as f64 / 2.0));
+        fe.push(format!(
+            "{f},{},{}",
+            first.0 as f64 / 2.0,
+            first.1 as f64 / 2.0
+        ));
     }
     run_step(opts, &fe, work_dir)?;
     run_step(
         opts,
-        &["exhaustive_matcher".into(), "--database_path".into(), s(&db), "--SiftMatching.use_gpu".into(), gpu.into()],
+        &[
+            "exhaustive_matcher".into(),
+            "--database_path".into(),
+            s(&db),
+            "--SiftMatching.use_gpu".into(),
+            gpu.into(),
+        ],
         work_dir,
     )?;
-    let mut mapper = vec!["mapper".to_string(), "--database_path".into(), s(&db), "--image_path".into(), s(image_dir), "--output_path".into(), s(&sparse)];
+    let mut mapper = vec![
+        "mapper".to_string(),
+        "--database_path".into(),
+        s(&db),
+        "--image_path".into(),
+        s(image_dir),
+        "--output_path".into(),
+        s(&sparse),
+    ];
     if opts.focal_px.is_some() {
         mapper.extend(["--Mapper.ba_refine_focal_length".into(), "0".into()]);
     }
@@ -110,11 +143,19 @@ pub fn run_colmap_cli(image_dir: &Path, work_dir: &Path, opts: &ColmapCliOptions
     entries.sort();
     for dir in entries {
         let m = colmap::read_model(&dir)?;
-        if best.as_ref().is_none_or(|b| m.images.len() > b.0.images.len()) {
+        if best
+            .as_ref()
+            .is_none_or(|b| m.images.len() > b.0.images.len())
+        {
             best = Some((m, dir));
         }
     }
-    best.ok_or_else(|| SfmError::Colmap(format!("COLMAP's mapper registered no model in {}", sparse.display())))
+    best.ok_or_else(|| {
+        SfmError::Colmap(format!(
+            "COLMAP's mapper registered no model in {}",
+            sparse.display()
+        ))
+    })
 }
 
 fn first_image_size(dir: &Path) -> Result<(u32, u32), SfmError> {
@@ -129,5 +170,8 @@ fn first_image_size(dir: &Path) -> Result<(u32, u32), SfmError> {
             return Ok(d);
         }
     }
-    Err(SfmError::Colmap(format!("no readable image in {}", dir.display())))
+    Err(SfmError::Colmap(format!(
+        "no readable image in {}",
+        dir.display()
+    )))
 }

@@ -333,7 +333,12 @@ mod tests {
 
     fn blobs(w: usize, h: usize, shift: f32) -> Gray {
         let mut data = vec![0.0f32; w * h];
-        let centres = [(20.0, 18.0, 4.0), (50.0, 40.0, 6.0), (33.0, 52.0, 3.0), (60.0, 12.0, 5.0)];
+        let centres = [
+            (20.0, 18.0, 4.0),
+            (50.0, 40.0, 6.0),
+            (33.0, 52.0, 3.0),
+            (60.0, 12.0, 5.0),
+        ];
         for y in 0..h {
             for x in 0..w {
                 let mut v = 0.2;

@@ -68,7 +68,11 @@ fn apply_h(h: &Matrix3<f64>, p: &Vector2<f64>) -> Vector2<f64> {
 
 /// Eight-point estimate of F with x2ᵀ F x1 = 0 (Hartley-normalised). With `essential` the two
 /// non-zero singular values are equalised (calibrated input), otherwise rank 2 is enforced.
-pub fn eight_point(x1: &[Vector2<f64>], x2: &[Vector2<f64>], essential: bool) -> Option<Matrix3<f64>> {
+pub fn eight_point(
+    x1: &[Vector2<f64>],
+    x2: &[Vector2<f64>],
+    essential: bool,
+) -> Option<Matrix3<f64>> {
     let n = x1.len();
     if n < 8 || x2.len() != n {
         return None;
@@ -79,7 +83,17 @@ pub fn eight_point(x1: &[Vector2<f64>], x2: &[Vector2<f64>], essential: bool) ->
     for i in 0..n {
         let p = apply_h(&t1, &x1[i]);
         let q = apply_h(&t2, &x2[i]);
-        let row = [q.x * p.x, q.x * p.y, q.x, q.y * p.x, q.y * p.y, q.y, p.x, p.y, 1.0];
+        let row = [
+            q.x * p.x,
+            q.x * p.y,
+            q.x,
+            q.y * p.x,
+            q.y * p.y,
+            q.y,
+            p.x,
+            p.y,
+            1.0,
+        ];
         for (k, v) in row.iter().enumerate() {
             a[(i, k)] = *v;
         }
@@ -134,7 +148,9 @@ pub fn ransac_epipolar(
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let t2 = thresh * thresh;
     let count = |f: &Matrix3<f64>| -> usize {
-        (0..n).filter(|&i| sampson_sq(f, &x1[i], &x2[i]) < t2).count()
+        (0..n)
+            .filter(|&i| sampson_sq(f, &x1[i], &x2[i]) < t2)
+            .count()
     };
     let mut best: Option<(Matrix3<f64>, usize)> = None;
     let mut iters = max_iters;
@@ -171,7 +187,9 @@ pub fn ransac_epipolar(
             _ => break,
         }
     }
-    let mask: Vec<bool> = (0..n).map(|i| sampson_sq(&f, &x1[i], &x2[i]) < t2).collect();
+    let mask: Vec<bool> = (0..n)
+        .map(|i| sampson_sq(&f, &x1[i], &x2[i]) < t2)
+        .collect();
     Some((f, mask))
 }
 
@@ -315,7 +333,13 @@ pub fn pnp_dlt(xw: &[Vector3<f64>], xn: &[Vector2<f64>]) -> Option<Pose> {
 
 /// Robust Gauss–Newton refinement of a single pose on calibrated observations (Huber on the
 /// normalised reprojection error, `huber` in normalised units).
-pub fn refine_pose(pose: Pose, xw: &[Vector3<f64>], xn: &[Vector2<f64>], huber: f64, iters: usize) -> Pose {
+pub fn refine_pose(
+    pose: Pose,
+    xw: &[Vector3<f64>],
+    xn: &[Vector2<f64>],
+    huber: f64,
+    iters: usize,
+) -> Pose {
     let mut p = pose;
     for _ in 0..iters {
         let mut h = nalgebra::Matrix6::<f64>::zeros();
@@ -453,7 +477,10 @@ mod tests {
         let (e, mask) = ransac_epipolar(&x1, &x2, true, 1e-3, 2000, 3).unwrap();
         assert!(mask[30..].iter().all(|&b| b));
         assert!(mask[..30].iter().filter(|&&b| b).count() < 5);
-        let (a, b): (Vec<_>, Vec<_>) = (0..150).filter(|&i| mask[i]).map(|i| (x1[i], x2[i])).unzip();
+        let (a, b): (Vec<_>, Vec<_>) = (0..150)
+            .filter(|&i| mask[i])
+            .map(|i| (x1[i], x2[i]))
+            .unzip();
         let (rel, _) = decompose_essential(&e, &a, &b).unwrap();
         let rerr = (rel.r.inverse() * p2.r).angle();
         assert!(rerr < 1e-6, "rotation error {rerr}");
@@ -475,8 +502,11 @@ mod tests {
         assert!((p.t - p2.t).norm() < 1e-8);
 
         let x = pts[20];
-        let tri = triangulate(&[(Pose::identity(), project(&Pose::identity(), &x)), (p2, project(&p2, &x))])
-            .unwrap();
+        let tri = triangulate(&[
+            (Pose::identity(), project(&Pose::identity(), &x)),
+            (p2, project(&p2, &x)),
+        ])
+        .unwrap();
         assert!((tri - x).norm() < 1e-9);
     }
 

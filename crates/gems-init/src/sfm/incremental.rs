@@ -4,7 +4,7 @@
 use super::ba::{self, BaOptions, Intrinsics, Observation};
 use super::features::Features;
 use super::geometry::{self, Pose};
-use super::{PairMatches, SfmOptions};
+use super::{PairCorr, PairMatches, SfmOptions};
 use nalgebra::{Vector2, Vector3};
 
 /// One observation of a track: view, working-level pixel, and whether it is still trusted.
@@ -36,12 +36,15 @@ impl Recon {
 
     /// Observations that take part in the model: active, of a registered view, on a point.
     pub fn used_obs(&self) -> impl Iterator<Item = (&Track, &TrackObs)> {
-        self.tracks.iter().filter(|t| t.xyz.is_some()).flat_map(move |t| {
-            t.obs
-                .iter()
-                .filter(move |o| o.active && self.poses[o.view].is_some())
-                .map(move |o| (t, o))
-        })
+        self.tracks
+            .iter()
+            .filter(|t| t.xyz.is_some())
+            .flat_map(move |t| {
+                t.obs
+                    .iter()
+                    .filter(move |o| o.active && self.poses[o.view].is_some())
+                    .map(move |o| (t, o))
+            })
     }
 
     /// Mean reprojection error (working-level px) over the used observations.
@@ -60,7 +63,7 @@ impl Recon {
 /// Chain pairwise matches into tracks with a union–find over (view, feature) nodes. A track keeps
 /// at most one feature per view (the first met), so inconsistent chains cannot put two
 /// observations of one point in the same image.
-fn build_tracks(feats: &[Features], pairs: &[PairMatches]) -> Vec<Track> {
+pub(crate) fn build_tracks(feats: &[Features], pairs: &[PairMatches]) -> Vec<Track> {
     let mut offset = vec![0usize; feats.len() + 1];
     for (i, f) in feats.iter().enumerate() {
         offset[i + 1] = offset[i] + f.xy.len();
@@ -122,7 +125,12 @@ fn build_tracks(feats: &[Features], pairs: &[PairMatches]) -> Vec<Track> {
 
 /// Triangulate a track from its active observations in registered views; drops the worst
 /// observation while the fit is inconsistent. Returns whether a point was set.
-fn triangulate_track(t: &mut Track, poses: &[Option<Pose>], k: &Intrinsics, opts: &SfmOptions) -> bool {
+fn triangulate_track(
+    t: &mut Track,
+    poses: &[Option<Pose>],
+    k: &Intrinsics,
+    opts: &SfmOptions,
+) -> bool {
     let mut use_: Vec<usize> = (0..t.obs.len())
         .filter(|&i| t.obs[i].active && poses[t.obs[i].view].is_some())
         .collect();
@@ -130,7 +138,12 @@ fn triangulate_track(t: &mut Track, poses: &[Option<Pose>], k: &Intrinsics, opts
     while use_.len() >= 2 {
         let obs: Vec<(Pose, Vector2<f64>)> = use_
             .iter()
-            .map(|&i| (poses[t.obs[i].view].expect("registered"), k.normalise(&t.obs[i].xy)))
+            .map(|&i| {
+                (
+                    poses[t.obs[i].view].expect("registered"),
+                    k.normalise(&t.obs[i].xy),
+                )
+            })
             .collect();
         let Some(x) = geometry::triangulate(&obs) else {
             return false;
@@ -164,7 +177,8 @@ fn triangulate_track(t: &mut Track, poses: &[Option<Pose>], k: &Intrinsics, opts
         let mut max_angle: f64 = 0.0;
         for a in 0..centres.len() {
             for b in a + 1..centres.len() {
-                max_angle = max_angle.max(geometry::triangulation_angle(&centres[a], &centres[b], &x));
+                max_angle =
+                    max_angle.max(geometry::triangulation_angle(&centres[a], &centres[b], &x));
             }
         }
         if max_angle < min_angle {
@@ -203,7 +217,11 @@ fn run_ba(r: &mut Recon, fixed_view: usize, refine_focal: bool, iters: usize, op
     if obs.is_empty() {
         return;
     }
-    let mut poses: Vec<Pose> = r.poses.iter().map(|p| p.unwrap_or(Pose::identity())).collect();
+    let mut poses: Vec<Pose> = r
+        .poses
+        .iter()
+        .map(|p| p.unwrap_or(Pose::identity()))
+        .collect();
     let fixed: Vec<bool> = (0..poses.len()).map(|v| v == fixed_view).collect();
     ba::bundle_adjust(
         &mut poses,
@@ -265,27 +283,32 @@ fn triangulate_all(r: &mut Recon, opts: &SfmOptions) -> usize {
 }
 
 /// The initial pair: the essential matrix with the most inliers that also has enough parallax.
-fn initial_pair(feats: &[Features], pairs: &[PairMatches], k: &Intrinsics, opts: &SfmOptions) -> Option<(usize, usize, Pose)> {
-    let mut order: Vec<&PairMatches> = pairs.iter().collect();
-    order.sort_by(|a, b| b.matches.len().cmp(&a.matches.len()).then((a.i, a.j).cmp(&(b.i, b.j))));
+fn initial_pair(
+    pairs: &[PairCorr],
+    k: &Intrinsics,
+    opts: &SfmOptions,
+) -> Option<(usize, usize, Pose)> {
+    let mut order: Vec<&PairCorr> = pairs.iter().collect();
+    order.sort_by(|a, b| {
+        b.x1.len()
+            .cmp(&a.x1.len())
+            .then((a.i, a.j).cmp(&(b.i, b.j)))
+    });
     let mut best: Option<(f64, usize, usize, Pose)> = None;
     let good_angle = (3.0f64).max(2.0 * opts.min_tri_angle_deg).to_radians();
     for pm in order.iter().take(30) {
-        let x1: Vec<_> = pm
-            .matches
-            .iter()
-            .map(|&(a, _)| k.normalise(&to_v(feats[pm.i].xy[a as usize])))
-            .collect();
-        let x2: Vec<_> = pm
-            .matches
-            .iter()
-            .map(|&(_, b)| k.normalise(&to_v(feats[pm.j].xy[b as usize])))
-            .collect();
+        let x1: Vec<_> = pm.x1.iter().map(|p| k.normalise(p)).collect();
+        let x2: Vec<_> = pm.x2.iter().map(|p| k.normalise(p)).collect();
         let seed = opts.seed.wrapping_add(0x1000 + (pm.i * 7919 + pm.j) as u64);
-        let Some((e, mask)) = geometry::ransac_epipolar(&x1, &x2, true, opts.max_reproj_px / k.f, 2000, seed) else {
+        let Some((e, mask)) =
+            geometry::ransac_epipolar(&x1, &x2, true, opts.max_reproj_px / k.f, 2000, seed)
+        else {
             continue;
         };
-        let (a, b): (Vec<_>, Vec<_>) = (0..x1.len()).filter(|&i| mask[i]).map(|i| (x1[i], x2[i])).unzip();
+        let (a, b): (Vec<_>, Vec<_>) = (0..x1.len())
+            .filter(|&i| mask[i])
+            .map(|i| (x1[i], x2[i]))
+            .unzip();
         let Some((rel, front)) = geometry::decompose_essential(&e, &a, &b) else {
             continue;
         };
@@ -314,22 +337,18 @@ fn initial_pair(feats: &[Features], pairs: &[PairMatches], k: &Intrinsics, opts:
     best.map(|(_, i, j, p)| (i, j, p))
 }
 
-fn to_v(p: [f32; 2]) -> Vector2<f64> {
-    Vector2::new(p[0] as f64, p[1] as f64)
-}
-
-/// Full incremental reconstruction with intrinsics `k` (working level). `refine_focal` frees the
+/// Full incremental reconstruction of `tracks` with intrinsics `k` (working level); `pairs`
+/// are the two-view correspondences the initial pair is chosen from. `refine_focal` frees the
 /// focal in bundle adjustment once three views are registered. None when no initial pair exists.
 pub(crate) fn reconstruct(
-    feats: &[Features],
-    pairs: &[PairMatches],
+    tracks: Vec<Track>,
+    pairs: &[PairCorr],
+    nviews: usize,
     k: Intrinsics,
     refine_focal: bool,
     opts: &SfmOptions,
 ) -> Option<Recon> {
-    let nviews = feats.len();
-    let tracks = build_tracks(feats, pairs);
-    let (i0, j0, rel) = initial_pair(feats, pairs, &k, opts)?;
+    let (i0, j0, rel) = initial_pair(pairs, &k, opts)?;
     let mut r = Recon {
         k,
         poses: vec![None; nviews],
@@ -373,10 +392,18 @@ pub(crate) fn reconstruct(
                 .copied()
                 .filter(|&(ti, oi)| r.tracks[ti].xyz.is_some() && r.tracks[ti].obs[oi].active)
                 .collect();
-            let xw: Vec<Vector3<f64>> = corr.iter().map(|&(ti, _)| r.tracks[ti].xyz.expect("point")).collect();
-            let xn: Vec<Vector2<f64>> = corr.iter().map(|&(ti, oi)| r.k.normalise(&r.tracks[ti].obs[oi].xy)).collect();
+            let xw: Vec<Vector3<f64>> = corr
+                .iter()
+                .map(|&(ti, _)| r.tracks[ti].xyz.expect("point"))
+                .collect();
+            let xn: Vec<Vector2<f64>> = corr
+                .iter()
+                .map(|&(ti, oi)| r.k.normalise(&r.tracks[ti].obs[oi].xy))
+                .collect();
             let seed = opts.seed.wrapping_add(0x2000 + v as u64 * 131 + n as u64);
-            let Some((pose, mask)) = geometry::ransac_pnp(&xw, &xn, opts.max_reproj_px / r.k.f, 1000, seed) else {
+            let Some((pose, mask)) =
+                geometry::ransac_pnp(&xw, &xn, opts.max_reproj_px / r.k.f, 1000, seed)
+            else {
                 continue;
             };
             let ninl = mask.iter().filter(|&&m| m).count();
@@ -397,7 +424,12 @@ pub(crate) fn reconstruct(
         let nreg = r.registered();
         run_ba(&mut r, i0, refine_focal && nreg >= 3, 15, opts);
         filter_outliers(&mut r, opts);
-        tracing::debug!(view = v, registered = nreg, new_points = added, "registered view");
+        tracing::debug!(
+            view = v,
+            registered = nreg,
+            new_points = added,
+            "registered view"
+        );
     }
     triangulate_all(&mut r, opts);
     run_ba(&mut r, i0, refine_focal, 50, opts);
@@ -420,10 +452,22 @@ mod tests {
         };
         let feats = vec![f(3), f(3), f(3)];
         let pairs = vec![
-            PairMatches { i: 0, j: 1, matches: vec![(0, 0), (1, 1)] },
-            PairMatches { i: 1, j: 2, matches: vec![(0, 0), (1, 2)] },
+            PairMatches {
+                i: 0,
+                j: 1,
+                matches: vec![(0, 0), (1, 1)],
+            },
+            PairMatches {
+                i: 1,
+                j: 2,
+                matches: vec![(0, 0), (1, 2)],
+            },
             // Inconsistent: links feature 0 of view 0 to feature 2 of view 2 as well as 0.
-            PairMatches { i: 0, j: 2, matches: vec![(0, 2)] },
+            PairMatches {
+                i: 0,
+                j: 2,
+                matches: vec![(0, 2)],
+            },
         ];
         let t = build_tracks(&feats, &pairs);
         for tr in &t {

@@ -27,10 +27,12 @@ pub mod features;
 pub mod geometry;
 mod incremental;
 mod output;
+mod tracking;
 
 pub use colmap_cli::{ColmapCliOptions, run_colmap_cli};
 pub use geometry::Pose;
 pub use output::{draw_top_view, to_colmap_model, write_outputs};
+pub use gems_data::colmap::SparseModel;
 
 use features::{FeatureParams, Features, Gray};
 use rayon::prelude::*;
@@ -88,7 +90,11 @@ pub enum SfmError {
     #[error("structure from motion needs at least 2 images, got {0}")]
     TooFewImages(usize),
     #[error("image {name} is {width}x{height}; structure from motion needs at least 32x32 pixels")]
-    ImageTooSmall { name: String, width: u32, height: u32 },
+    ImageTooSmall {
+        name: String,
+        width: u32,
+        height: u32,
+    },
     #[error("images must share one size: {first} is {w0}x{h0} but {name} is {w}x{h}")]
     SizeMismatch {
         first: String,
@@ -98,7 +104,9 @@ pub enum SfmError {
         w: u32,
         h: u32,
     },
-    #[error("images {0:?} have no texture (no keypoints at any pyramid level); fewer than two images are usable")]
+    #[error(
+        "images {0:?} have no texture (no keypoints at any pyramid level); fewer than two images are usable"
+    )]
     Textureless(Vec<String>),
     #[error("images {0} and {1} are identical; there is no parallax to reconstruct from")]
     IdenticalImages(String, String),
@@ -112,6 +120,12 @@ pub enum SfmError {
         registered: usize,
         total: usize,
         unregistered: Vec<String>,
+    },
+    #[error("failed to read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     #[error("failed to write {path}: {source}")]
     Write {
@@ -184,11 +198,56 @@ pub struct SfmResult {
     pub stats: SfmStats,
 }
 
-/// Verified matches of one image pair at the working level.
+/// Two-view correspondences (working-level pixels) of views i < j, geometrically verified.
+pub(crate) struct PairCorr {
+    pub i: usize,
+    pub j: usize,
+    pub x1: Vec<nalgebra::Vector2<f64>>,
+    pub x2: Vec<nalgebra::Vector2<f64>>,
+}
+
+/// Verified descriptor matches (feature indices) of one image pair at the working level.
 pub(crate) struct PairMatches {
     pub i: usize,
     pub j: usize,
     pub matches: Vec<(u32, u32)>,
+}
+
+/// The images of a scene folder: `<dir>/images/*` when that folder exists, else `<dir>/*`
+/// (png/jpg/jpeg), sorted by file name.
+pub fn load_images(dir: &std::path::Path) -> Result<Vec<SfmImage>, SfmError> {
+    let img_dir = if dir.join("images").is_dir() { dir.join("images") } else { dir.to_path_buf() };
+    let read_err = |e: std::io::Error| SfmError::Read {
+        path: img_dir.clone(),
+        source: Box::new(e),
+    };
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&img_dir)
+        .map_err(read_err)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.is_file()
+                && p.extension()
+                    .and_then(|e| e.to_str())
+                    .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg"))
+        })
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(SfmError::TooFewImages(0));
+    }
+    files
+        .par_iter()
+        .map(|p| {
+            let image = image::open(p)
+                .map_err(|e| SfmError::Read {
+                    path: p.clone(),
+                    source: Box::new(e),
+                })?
+                .to_rgb8();
+            let name = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            Ok(SfmImage { name, image })
+        })
+        .collect()
 }
 
 /// Validate the input and reconstruct. See the module docs for the pipeline.
@@ -197,7 +256,10 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     validate(images, opts)?;
     let (w, h) = images[0].image.dimensions();
     let long = w.max(h) as f64;
-    let grays: Vec<Gray> = images.par_iter().map(|im| Gray::from_rgb(&im.image)).collect();
+    let grays: Vec<Gray> = images
+        .par_iter()
+        .map(|im| Gray::from_rgb(&im.image))
+        .collect();
     check_identical(images, &grays)?;
 
     let mut best: Option<(incremental::Recon, u32, f64)> = None;
@@ -207,7 +269,9 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     for &ws in &opts.working_sizes {
         let tf = Instant::now();
         let scale = features::exact_scale(w, ws as f64 / long);
-        let (feats, pairs) = features_and_matches(images, &grays, scale as f32, opts);
+        let work: Vec<Gray> = grays.par_iter().map(|g| g.resized(scale as f32)).collect();
+        let (feats, pairs) = features_and_matches(&work, opts);
+        let (tracks, corrs) = all_tracks(&work, &feats, &pairs, opts);
         t_feat += tf.elapsed().as_secs_f64();
         if textureless.is_none() {
             // A view with (almost) no keypoints at every level is textureless; it stays
@@ -248,11 +312,19 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
                 cx: 0.5 * sw,
                 cy: 0.5 * sh,
             };
-            let rec = incremental::reconstruct(&feats, &pairs, k, refine, opts);
+            let rec =
+                incremental::reconstruct(tracks.clone(), &corrs, images.len(), k, refine, opts);
             let Some(rec) = rec else { continue };
             let nreg = rec.registered();
             let err = rec.mean_error() / scale;
-            tracing::info!(working_size = ws, focal_start = f / scale, focal = rec.k.f / scale, registered = nreg, error_px = err, "sfm attempt");
+            tracing::info!(
+                working_size = ws,
+                focal_start = f / scale,
+                focal = rec.k.f / scale,
+                registered = nreg,
+                error_px = err,
+                "sfm attempt"
+            );
             let better = match &best {
                 None => true,
                 Some((b, _, bs)) => {
@@ -265,7 +337,10 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
             }
         }
         t_rec += tr.elapsed().as_secs_f64();
-        if best.as_ref().is_some_and(|b| b.0.registered() == images.len()) {
+        if best
+            .as_ref()
+            .is_some_and(|b| b.0.registered() == images.len())
+        {
             break;
         }
     }
@@ -295,16 +370,24 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
         return Err(SfmError::TooFewImages(images.len()));
     }
     if opts.working_sizes.is_empty() || opts.working_sizes.iter().any(|&s| s < 32) {
-        return Err(SfmError::InvalidOption("working sizes must be ≥ 32 px and non-empty".into()));
+        return Err(SfmError::InvalidOption(
+            "working sizes must be ≥ 32 px and non-empty".into(),
+        ));
     }
-    if opts.focal_px.is_none() && (opts.focal_candidates.is_empty() || opts.focal_candidates.iter().any(|c| !(*c > 0.0))) {
-        return Err(SfmError::InvalidOption("focal candidates must be positive and non-empty".into()));
+    if opts.focal_px.is_none()
+        && (opts.focal_candidates.is_empty() || opts.focal_candidates.iter().any(|c| !(*c > 0.0)))
+    {
+        return Err(SfmError::InvalidOption(
+            "focal candidates must be positive and non-empty".into(),
+        ));
     }
     if opts.focal_px.is_some_and(|f| !(f > 0.0 && f.is_finite())) {
         return Err(SfmError::InvalidOption("focal_px must be positive".into()));
     }
     if opts.max_features < 16 || !(opts.max_reproj_px > 0.0) {
-        return Err(SfmError::InvalidOption("max_features ≥ 16 and max_reproj_px > 0 required".into()));
+        return Err(SfmError::InvalidOption(
+            "max_features ≥ 16 and max_reproj_px > 0 required".into(),
+        ));
     }
     let (w0, h0) = images[0].image.dimensions();
     for im in images {
@@ -335,11 +418,20 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
 fn check_identical(images: &[SfmImage], grays: &[Gray]) -> Result<(), SfmError> {
     let first = &grays[0].data;
     let all_same = grays[1..].iter().all(|g| {
-        let mad = g.data.iter().zip(first).map(|(a, b)| (a - b).abs()).sum::<f32>() / first.len() as f32;
+        let mad = g
+            .data
+            .iter()
+            .zip(first)
+            .map(|(a, b)| (a - b).abs())
+            .sum::<f32>()
+            / first.len() as f32;
         mad < 1e-4
     });
     if all_same {
-        return Err(SfmError::IdenticalImages(images[0].name.clone(), images[1].name.clone()));
+        return Err(SfmError::IdenticalImages(
+            images[0].name.clone(),
+            images[1].name.clone(),
+        ));
     }
     Ok(())
 }
@@ -357,16 +449,15 @@ fn extract_one(g: &Gray, scale: f32, opts: &SfmOptions) -> Features {
     features::extract(&g.resized(scale), &feature_params(opts))
 }
 
-/// Features of every view and fundamental-matrix-verified matches of every pair.
-fn features_and_matches(
-    images: &[SfmImage],
-    grays: &[Gray],
-    scale: f32,
-    opts: &SfmOptions,
-) -> (Vec<Features>, Vec<PairMatches>) {
-    let feats: Vec<Features> = grays.par_iter().map(|g| extract_one(g, scale, opts)).collect();
-    let n = images.len();
-    let pairs: Vec<(usize, usize)> = (0..n).flat_map(|i| (i + 1..n).map(move |j| (i, j))).collect();
+/// Features of every view (working level) and fundamental-matrix-verified descriptor matches of
+/// every pair.
+fn features_and_matches(work: &[Gray], opts: &SfmOptions) -> (Vec<Features>, Vec<PairMatches>) {
+    let fp = feature_params(opts);
+    let feats: Vec<Features> = work.par_iter().map(|g| features::extract(g, &fp)).collect();
+    let n = work.len();
+    let pairs: Vec<(usize, usize)> = (0..n)
+        .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+        .collect();
     let verified: Vec<PairMatches> = pairs
         .par_iter()
         .filter_map(|&(i, j)| {
@@ -374,15 +465,135 @@ fn features_and_matches(
             if m.len() < opts.min_pair_inliers {
                 return None;
             }
-            let to_v = |p: [f32; 2]| nalgebra::Vector2::new(p[0] as f64, p[1] as f64);
-            let x1: Vec<_> = m.iter().map(|&(a, _)| to_v(feats[i].xy[a as usize])).collect();
-            let x2: Vec<_> = m.iter().map(|&(_, b)| to_v(feats[j].xy[b as usize])).collect();
+            let x1: Vec<_> = m
+                .iter()
+                .map(|&(a, _)| to_v(feats[i].xy[a as usize]))
+                .collect();
+            let x2: Vec<_> = m
+                .iter()
+                .map(|&(_, b)| to_v(feats[j].xy[b as usize]))
+                .collect();
             let seed = opts.seed ^ ((i as u64) << 32 | j as u64);
-            let (_, mask) = geometry::ransac_epipolar(&x1, &x2, false, opts.max_reproj_px, 1000, seed)?;
-            let matches: Vec<(u32, u32)> = m.iter().zip(&mask).filter(|(_, k)| **k).map(|(m, _)| *m).collect();
+            let (_, mask) =
+                geometry::ransac_epipolar(&x1, &x2, false, opts.max_reproj_px, 1000, seed)?;
+            let matches: Vec<(u32, u32)> = m
+                .iter()
+                .zip(&mask)
+                .filter(|(_, k)| **k)
+                .map(|(m, _)| *m)
+                .collect();
             (matches.len() >= opts.min_pair_inliers).then_some(PairMatches { i, j, matches })
         })
         .collect();
-    tracing::debug!(pairs = verified.len(), "verified image pairs");
+    tracing::debug!(pairs = verified.len(), "verified descriptor pairs");
     (feats, verified)
+}
+
+fn to_v(p: [f32; 2]) -> nalgebra::Vector2<f64> {
+    nalgebra::Vector2::new(p[0] as f64, p[1] as f64)
+}
+
+/// Tracks from both matchers: descriptor matches chained by union–find, and for each root view
+/// its keypoints tracked into its best-overlapping neighbours (each pair verified by a
+/// fundamental-matrix RANSAC). Also returns every verified pair's correspondences.
+fn all_tracks(
+    work: &[Gray],
+    feats: &[Features],
+    pairs: &[PairMatches],
+    opts: &SfmOptions,
+) -> (Vec<incremental::Track>, Vec<PairCorr>) {
+    let n = work.len();
+    let mut tracks = incremental::build_tracks(feats, pairs);
+    let mut corr: std::collections::BTreeMap<(usize, usize), PairCorr> =
+        std::collections::BTreeMap::new();
+    let mut add_corr =
+        |i: usize, j: usize, a: nalgebra::Vector2<f64>, b: nalgebra::Vector2<f64>| {
+            let (key, a, b) = if i < j {
+                ((i, j), a, b)
+            } else {
+                ((j, i), b, a)
+            };
+            let e = corr.entry(key).or_insert_with(|| PairCorr {
+                i: key.0,
+                j: key.1,
+                x1: Vec::new(),
+                x2: Vec::new(),
+            });
+            e.x1.push(a);
+            e.x2.push(b);
+        };
+    for pm in pairs {
+        for &(a, b) in &pm.matches {
+            add_corr(
+                pm.i,
+                pm.j,
+                to_v(feats[pm.i].xy[a as usize]),
+                to_v(feats[pm.j].xy[b as usize]),
+            );
+        }
+    }
+    let wl = work[0].w.max(work[0].h) as f32;
+    let tp = tracking::TrackParams {
+        half: ((wl * 0.045).round() as i32).clamp(4, 10),
+        radius: ((wl * 0.07).round() as i32).clamp(5, 20),
+        neighbours: 4,
+        min_ncc: 0.75,
+        min_margin: 0.01,
+        fb_tol: 1.0,
+    };
+    let smooth: Vec<tracking::Prepared> = work
+        .par_iter()
+        .map(|g| tracking::Prepared::new(g.gaussian(1.5)))
+        .collect();
+    let ov = tracking::overlaps(work, work[0].w);
+    for i in 0..n {
+        let mut nb: Vec<usize> = (0..n).filter(|&j| j != i && ov[i][j].score > 0.2).collect();
+        nb.sort_by(|&a, &b| ov[i][b].score.total_cmp(&ov[i][a].score).then(a.cmp(&b)));
+        nb.truncate(tp.neighbours);
+        let pts = &feats[i].xy;
+        let mut root: Vec<incremental::Track> = pts
+            .iter()
+            .map(|p| incremental::Track {
+                obs: vec![incremental::TrackObs {
+                    view: i,
+                    xy: to_v(*p),
+                    active: true,
+                }],
+                xyz: None,
+            })
+            .collect();
+        for &j in &nb {
+            let found = tracking::track_points(&smooth[i], &smooth[j], pts, ov[i][j].shift, &tp);
+            let idx: Vec<usize> = (0..pts.len()).filter(|&k| found[k].is_some()).collect();
+            if idx.len() < opts.min_pair_inliers {
+                continue;
+            }
+            let x1: Vec<_> = idx.iter().map(|&k| to_v(pts[k])).collect();
+            let x2: Vec<_> = idx
+                .iter()
+                .map(|&k| to_v(found[k].expect("tracked")))
+                .collect();
+            let seed = opts.seed ^ 0x5eed ^ ((i as u64) << 32 | j as u64);
+            let Some((_, mask)) =
+                geometry::ransac_epipolar(&x1, &x2, false, opts.max_reproj_px, 1000, seed)
+            else {
+                continue;
+            };
+            if mask.iter().filter(|&&m| m).count() < opts.min_pair_inliers {
+                continue;
+            }
+            for ((&k, m), (a, b)) in idx.iter().zip(&mask).zip(x1.iter().zip(&x2)) {
+                if *m {
+                    root[k].obs.push(incremental::TrackObs {
+                        view: j,
+                        xy: *b,
+                        active: true,
+                    });
+                    add_corr(i, j, *a, *b);
+                }
+            }
+        }
+        tracks.extend(root.into_iter().filter(|t| t.obs.len() >= 2));
+    }
+    (tracks, corr.into_values().collect())
 }

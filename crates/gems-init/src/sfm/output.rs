@@ -3,7 +3,9 @@
 
 use super::incremental::Recon;
 use super::{SfmCamera, SfmError, SfmImage, SfmPoint, SfmResult, SfmStats, SfmView};
-use gems_data::colmap::{self, Camera, CameraModel, Image, ModelFormat, Point2D, Point3D, SparseModel};
+use gems_data::colmap::{
+    self, Camera, CameraModel, Image, ModelFormat, Point2D, Point3D, SparseModel,
+};
 use nalgebra::{Vector2, Vector3};
 use std::path::Path;
 
@@ -13,18 +15,28 @@ fn sample_rgb(img: &image::RgbImage, x: f64, y: f64) -> [f64; 3] {
     let fx = (x - 0.5).clamp(0.0, w - 1.0);
     let fy = (y - 0.5).clamp(0.0, h - 1.0);
     let (x0, y0) = (fx.floor() as u32, fy.floor() as u32);
-    let (x1, y1) = ((x0 + 1).min(img.width() - 1), (y0 + 1).min(img.height() - 1));
+    let (x1, y1) = (
+        (x0 + 1).min(img.width() - 1),
+        (y0 + 1).min(img.height() - 1),
+    );
     let (ax, ay) = (fx - x0 as f64, fy - y0 as f64);
     let mut out = [0.0; 3];
     for (c, o) in out.iter_mut().enumerate() {
         let p = |x: u32, y: u32| img.get_pixel(x, y)[c] as f64;
-        *o = (p(x0, y0) * (1.0 - ax) + p(x1, y0) * ax) * (1.0 - ay) + (p(x0, y1) * (1.0 - ax) + p(x1, y1) * ax) * ay;
+        *o = (p(x0, y0) * (1.0 - ax) + p(x1, y0) * ax) * (1.0 - ay)
+            + (p(x0, y1) * (1.0 - ax) + p(x1, y1) * ax) * ay;
     }
     out
 }
 
 /// Scale the working-level reconstruction up to full resolution and collect the diagnostics.
-pub(crate) fn assemble(images: &[SfmImage], rec: &Recon, scale: f64, focal_from_metadata: bool, working_size: u32) -> SfmResult {
+pub(crate) fn assemble(
+    images: &[SfmImage],
+    rec: &Recon,
+    scale: f64,
+    focal_from_metadata: bool,
+    working_size: u32,
+) -> SfmResult {
     let (w, h) = images[0].image.dimensions();
     let camera = SfmCamera {
         width: w,
@@ -46,7 +58,11 @@ pub(crate) fn assemble(images: &[SfmImage], rec: &Recon, scale: f64, focal_from_
     let (mut err_sum, mut err_n) = (0.0, 0usize);
     for t in &rec.tracks {
         let Some(x) = t.xyz else { continue };
-        let used: Vec<_> = t.obs.iter().filter(|o| o.active && rec.poses[o.view].is_some()).collect();
+        let used: Vec<_> = t
+            .obs
+            .iter()
+            .filter(|o| o.active && rec.poses[o.view].is_some())
+            .collect();
         if used.len() < 2 {
             continue;
         }
@@ -77,13 +93,25 @@ pub(crate) fn assemble(images: &[SfmImage], rec: &Recon, scale: f64, focal_from_
         });
     }
     let registered = views.iter().filter(|v| v.pose.is_some()).count();
-    let unregistered = views.iter().filter(|v| v.pose.is_none()).map(|v| v.name.clone()).collect();
+    let unregistered = views
+        .iter()
+        .filter(|v| v.pose.is_none())
+        .map(|v| v.name.clone())
+        .collect();
     let stats = SfmStats {
         registered,
         total: views.len(),
         points: points.len(),
-        mean_reprojection_error: if err_n > 0 { err_sum / err_n as f64 } else { 0.0 },
-        mean_track_length: if points.is_empty() { 0.0 } else { err_n as f64 / points.len() as f64 },
+        mean_reprojection_error: if err_n > 0 {
+            err_sum / err_n as f64
+        } else {
+            0.0
+        },
+        mean_track_length: if points.is_empty() {
+            0.0
+        } else {
+            err_n as f64 / points.len() as f64
+        },
         seconds: 0.0,
         unregistered,
         working_size,
@@ -147,7 +175,11 @@ pub fn to_colmap_model(r: &SfmResult) -> SparseModel {
             xyz: p.xyz,
             rgb: p.rgb,
             error: p.error,
-            track: p.track.iter().map(|&(v, o)| (v as u32 + 1, o as u32)).collect(),
+            track: p
+                .track
+                .iter()
+                .map(|&(v, o)| (v as u32 + 1, o as u32))
+                .collect(),
         })
         .collect();
     SparseModel {
@@ -175,7 +207,9 @@ pub fn draw_top_view(r: &SfmResult, size: u32) -> image::RgbImage {
     }
     let up = up.try_normalize(1e-12).unwrap_or(Vector3::y());
     let mut ax2 = fwd - up * fwd.dot(&up);
-    ax2 = ax2.try_normalize(1e-12).unwrap_or_else(|| up.cross(&Vector3::x()).normalize());
+    ax2 = ax2
+        .try_normalize(1e-12)
+        .unwrap_or_else(|| up.cross(&Vector3::x()).normalize());
     let ax1 = ax2.cross(&up);
     let proj = |x: &Vector3<f64>| Vector2::new(x.dot(&ax1), -x.dot(&ax2));
     let centres: Vec<Vector2<f64>> = poses.iter().map(|p| proj(&p.centre())).collect();
@@ -185,8 +219,16 @@ pub fn draw_top_view(r: &SfmResult, size: u32) -> image::RgbImage {
         .map(|p| (proj(&Vector3::new(p.xyz[0], p.xyz[1], p.xyz[2])), p.rgb))
         .collect();
     // Robust extent: 2nd–98th percentile of everything, so stray points do not shrink the plot.
-    let mut xs: Vec<f64> = centres.iter().chain(pts.iter().map(|p| &p.0)).map(|p| p.x).collect();
-    let mut ys: Vec<f64> = centres.iter().chain(pts.iter().map(|p| &p.0)).map(|p| p.y).collect();
+    let mut xs: Vec<f64> = centres
+        .iter()
+        .chain(pts.iter().map(|p| &p.0))
+        .map(|p| p.x)
+        .collect();
+    let mut ys: Vec<f64> = centres
+        .iter()
+        .chain(pts.iter().map(|p| &p.0))
+        .map(|p| p.y)
+        .collect();
     xs.sort_by(|a, b| a.total_cmp(b));
     ys.sort_by(|a, b| a.total_cmp(b));
     let q = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
@@ -195,7 +237,12 @@ pub fn draw_top_view(r: &SfmResult, size: u32) -> image::RgbImage {
     let cy = 0.5 * (y0 + y1);
     let span = (x1 - x0).max(y1 - y0).max(1e-9) * 1.1;
     let s = size as f64;
-    let to_px = |p: &Vector2<f64>| ((p.x - cx) / span * s + 0.5 * s, (p.y - cy) / span * s + 0.5 * s);
+    let to_px = |p: &Vector2<f64>| {
+        (
+            (p.x - cx) / span * s + 0.5 * s,
+            (p.y - cy) / span * s + 0.5 * s,
+        )
+    };
     let put = |x: f64, y: f64, c: [u8; 3], img: &mut image::RgbImage| {
         if x >= 0.0 && y >= 0.0 && x < s && y < s {
             img.put_pixel(x as u32, y as u32, image::Rgb(c));
@@ -212,7 +259,12 @@ pub fn draw_top_view(r: &SfmResult, size: u32) -> image::RgbImage {
         let dir = proj(&(p.centre() + p.r.inverse() * Vector3::z())) - c;
         let dir = dir.try_normalize(1e-12).unwrap_or(Vector2::zeros());
         for k in 0..14 {
-            put(x + dir.x * k as f64, y + dir.y * k as f64, [0, 0, 200], &mut img);
+            put(
+                x + dir.x * k as f64,
+                y + dir.y * k as f64,
+                [0, 0, 200],
+                &mut img,
+            );
         }
         for dy in -3..=3 {
             for dx in -3..=3 {
@@ -236,11 +288,14 @@ pub fn write_outputs(r: &SfmResult, out_dir: &Path) -> Result<(), SfmError> {
     let png_path = out_dir.join("sfm_topview.png");
     let img = draw_top_view(r, 800);
     let mut bytes = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
-        .map_err(|e| SfmError::Write {
-            path: png_path.clone(),
-            source: Box::new(e),
-        })?;
+    img.write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )
+    .map_err(|e| SfmError::Write {
+        path: png_path.clone(),
+        source: Box::new(e),
+    })?;
     gems_data::write_atomic(&png_path, &bytes)?;
     Ok(())
 }

@@ -37,7 +37,11 @@ fn texture(rng: &mut ChaCha8Rng) -> Vec<[f32; 3]> {
         let cx = rng.random_range(0.0..TEX as f32);
         let cy = rng.random_range(0.0..TEX as f32);
         let r = rng.random_range(5.0..24.0f32);
-        let c = [rng.random_range(0.0..1.0f32), rng.random_range(0.0..1.0f32), rng.random_range(0.0..1.0f32)];
+        let c = [
+            rng.random_range(0.0..1.0f32),
+            rng.random_range(0.0..1.0f32),
+            rng.random_range(0.0..1.0f32),
+        ];
         let r0 = (cy - r - 2.0).max(0.0) as usize;
         let r1 = ((cy + r + 2.0) as usize).min(TEX - 1);
         let c0 = (cx - r - 2.0).max(0.0) as usize;
@@ -82,23 +86,80 @@ fn planes() -> Vec<Plane> {
     };
     vec![
         // back wall z = 6, x ∈ [-4, 4], y ∈ [-2.5, 1.5] (y down)
-        p([-4.0, -2.5, 6.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 8.0, 4.0, 0),
+        p(
+            [-4.0, -2.5, 6.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            8.0,
+            4.0,
+            0,
+        ),
         // floor y = 1.5
-        p([-4.0, 1.5, -1.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], 8.0, 7.0, 1),
+        p(
+            [-4.0, 1.5, -1.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            8.0,
+            7.0,
+            1,
+        ),
         // left wall x = -4
-        p([-4.0, -2.5, -1.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], 7.0, 4.0, 2),
+        p(
+            [-4.0, -2.5, -1.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 1.0, 0.0],
+            7.0,
+            4.0,
+            2,
+        ),
         // right wall x = 4
-        p([4.0, -2.5, -1.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], 7.0, 4.0, 3),
+        p(
+            [4.0, -2.5, -1.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 1.0, 0.0],
+            7.0,
+            4.0,
+            3,
+        ),
         // front face of a box standing on the floor
-        p([-1.2, 0.2, 3.8], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 1.4, 1.3, 4),
+        p(
+            [-1.2, 0.2, 3.8],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            1.4,
+            1.3,
+            4,
+        ),
         // its left face
-        p([-1.2, 0.2, 3.8], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], 1.0, 1.3, 2),
+        p(
+            [-1.2, 0.2, 3.8],
+            [0.0, 0.0, 1.0],
+            [0.0, 1.0, 0.0],
+            1.0,
+            1.3,
+            2,
+        ),
         // its top
-        p([-1.2, 0.2, 3.8], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], 1.4, 1.0, 3),
+        p(
+            [-1.2, 0.2, 3.8],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            1.4,
+            1.0,
+            3,
+        ),
     ]
 }
 
-fn render(pose: &Pose, f: f64, w: u32, h: u32, planes: &[Plane], texs: &[Vec<[f32; 3]>], acc: &mut [f32]) {
+fn render(
+    pose: &Pose,
+    f: f64,
+    w: u32,
+    h: u32,
+    planes: &[Plane],
+    texs: &[Vec<[f32; 3]>],
+    acc: &mut [f32],
+) {
     let rt = pose.r.inverse();
     let c = pose.centre();
     for y in 0..h {
@@ -106,7 +167,12 @@ fn render(pose: &Pose, f: f64, w: u32, h: u32, planes: &[Plane], texs: &[Vec<[f3
             // 2×2 supersampling against aliasing of texture edges.
             let mut col = [0.0f32; 3];
             for (sx, sy) in [(0.25, 0.25), (0.75, 0.25), (0.25, 0.75), (0.75, 0.75)] {
-                let d = rt * Vector3::new((x as f64 + sx - w as f64 / 2.0) / f, (y as f64 + sy - h as f64 / 2.0) / f, 1.0);
+                let d = rt
+                    * Vector3::new(
+                        (x as f64 + sx - w as f64 / 2.0) / f,
+                        (y as f64 + sy - h as f64 / 2.0) / f,
+                        1.0,
+                    );
                 let mut best = (f64::INFINITY, [0.1f32, 0.1, 0.1]);
                 for p in planes {
                     let n = p.u.cross(&p.v);
@@ -149,20 +215,37 @@ pub fn scene(views: usize, w: u32, h: u32, level: usize, max_blur_frac: f64, see
     let mut gt = Vec::new();
     for i in 0..views {
         let a = -0.35 + 0.7 * i as f64 / (views - 1).max(1) as f64;
-        let centre = Vector3::new(4.0 * a.sin(), -0.3 + 0.15 * (3.0 * a).sin(), 4.5 - 4.0 * a.cos());
+        let centre = Vector3::new(
+            4.0 * a.sin(),
+            -0.3 + 0.15 * (3.0 * a).sin(),
+            4.5 - 4.0 * a.cos(),
+        );
         let look = |c: Vector3<f64>| {
             let z = (target - c).normalize();
             let x = Vector3::new(0.0, 1.0, 0.0).cross(&z).normalize();
             let y = z.cross(&x);
-            let r = Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]));
+            let r = Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_rows(&[
+                x.transpose(),
+                y.transpose(),
+                z.transpose(),
+            ]));
             Pose { r, t: -(r * c) }
         };
         let mid = look(centre);
         // Shake: a random rotation rate and translation per burst, scaled so that 10 frame
         // intervals move the image by max_blur_frac·w.
-        let axis = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-0.3..0.3)).normalize();
+        let axis = Vector3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-0.3..0.3),
+        )
+        .normalize();
         let total_angle = max_blur_frac * w as f64 / f;
-        let trans = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 0.0) * 0.02;
+        let trans = Vector3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            0.0,
+        ) * 0.02;
         let mut acc = vec![0.0f32; (3 * w * h) as usize];
         let half = (level / 2) as i64;
         for k in -half..=half {
@@ -183,7 +266,11 @@ pub fn scene(views: usize, w: u32, h: u32, level: usize, max_blur_frac: f64, see
         });
         gt.push(mid);
     }
-    Scene { images, gt, focal: f }
+    Scene {
+        images,
+        gt,
+        focal: f,
+    }
 }
 
 /// Translation RMSE after Sim(3) (Umeyama) alignment of the registered camera centres to the
@@ -192,7 +279,9 @@ pub fn aligned_rmse_fraction(est: &[Option<Pose>], gt: &[Pose]) -> f64 {
     let (src, dst): (Vec<[f64; 3]>, Vec<[f64; 3]>) = est
         .iter()
         .zip(gt)
-        .filter_map(|(e, g)| e.map(|e| -> ([f64; 3], [f64; 3]) { (e.centre().into(), g.centre().into()) }))
+        .filter_map(|(e, g)| {
+            e.map(|e| -> ([f64; 3], [f64; 3]) { (e.centre().into(), g.centre().into()) })
+        })
         .unzip();
     let sim = gems_math::align::umeyama(&src, &dst, true).expect("alignment");
     let mse = src

@@ -1,0 +1,414 @@
+//! Guided patch tracking between overlapping views (the "KLT-style" half of the matcher).
+//!
+//! Descriptor matching needs the *same* keypoint to be detected in both images, which motion
+//! blur along different directions makes unlikely. Tracking does not: every keypoint of a root
+//! view is searched for by normalised cross-correlation of a large smoothed patch inside a window
+//! around the position predicted by the global shift between the two views, refined to sub-pixel
+//! by a parabola fit, and kept only if the search from the found position back into the root
+//! view returns to the start (forward–backward check) and the correlation peak is unique.
+//!
+//! Overlapping views are found from the images, not from their order: tiny thumbnails of every
+//! pair are correlated over all shifts, and each view tracks into its best-correlated neighbours.
+
+use super::features::Gray;
+use rayon::prelude::*;
+
+/// Settings, in working-level pixels.
+#[derive(Clone, Debug)]
+pub(crate) struct TrackParams {
+    /// Patch half-size (patch side 2·half+1).
+    pub half: i32,
+    /// Search radius around the predicted position.
+    pub radius: i32,
+    /// Neighbours each root view tracks into.
+    pub neighbours: usize,
+    pub min_ncc: f32,
+    /// Required gap between the best peak and the best score ≥ 3 px away.
+    pub min_margin: f32,
+    /// Forward–backward tolerance.
+    pub fb_tol: f32,
+}
+
+/// Overlap score and global shift (working-level px, dst − src) of an ordered view pair.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Overlap {
+    pub score: f32,
+    pub shift: [f32; 2],
+}
+
+const THUMB: usize = 48;
+
+/// Thumbnail correlation of every ordered pair: `out[i][j]`. Shifts are scaled to `work_w`.
+pub(crate) fn overlaps(grays: &[Gray], work_w: usize) -> Vec<Vec<Overlap>> {
+    let thumbs: Vec<Gray> = grays
+        .par_iter()
+        .map(|g| {
+            let s = THUMB as f32 / g.w as f32;
+            g.resized(s).gaussian(1.0)
+        })
+        .collect();
+    let n = thumbs.len();
+    let scale = work_w as f32 / thumbs[0].w as f32;
+    (0..n)
+        .into_par_iter()
+        .map(|i| {
+            (0..n)
+                .map(|j| {
+                    if i == j {
+                        return Overlap {
+                            score: -1.0,
+                            shift: [0.0, 0.0],
+                        };
+                    }
+                    let (score, dx, dy) = best_shift(&thumbs[i], &thumbs[j]);
+                    Overlap {
+                        score,
+                        shift: [dx as f32 * scale, dy as f32 * scale],
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Integer shift (dx, dy) maximising the NCC of a(x) against b(x + d) over the overlap, with at
+/// least half of the thumbnail overlapping.
+fn best_shift(a: &Gray, b: &Gray) -> (f32, i32, i32) {
+    let (w, h) = (a.w as i32, a.h as i32);
+    let (rx, ry) = (w / 2, h / 2);
+    let mut best = (-1.0f32, 0, 0);
+    for dy in -ry..=ry {
+        for dx in -rx..=rx {
+            let x0 = 0.max(-dx);
+            let x1 = w.min(w - dx);
+            let y0 = 0.max(-dy);
+            let y1 = h.min(h - dy);
+            if (x1 - x0) * (y1 - y0) * 2 < w * h {
+                continue;
+            }
+            let (mut sa, mut sb, mut saa, mut sbb, mut sab) =
+                (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+            for y in y0..y1 {
+                let ra = &a.data[(y * w) as usize..((y + 1) * w) as usize];
+                let rb = &b.data[((y + dy) * w) as usize..((y + dy + 1) * w) as usize];
+                for x in x0..x1 {
+                    let (p, q) = (ra[x as usize], rb[(x + dx) as usize]);
+                    sa += p;
+                    sb += q;
+                    saa += p * p;
+                    sbb += q * q;
+                    sab += p * q;
+                }
+            }
+            let n = ((x1 - x0) * (y1 - y0)) as f32;
+            let cov = sab - sa * sb / n;
+            let va = saa - sa * sa / n;
+            let vb = sbb - sb * sb / n;
+            if va <= 1e-9 || vb <= 1e-9 {
+                continue;
+            }
+            let ncc = cov / (va * vb).sqrt();
+            if ncc > best.0 {
+                best = (ncc, dx, dy);
+            }
+        }
+    }
+    best
+}
+
+/// Normalised template of `src` around the sub-pixel point `p`; false when flat.
+fn template(src: &Gray, p: [f32; 2], half: i32, out: &mut Vec<f32>) -> bool {
+    out.clear();
+    for dy in -half..=half {
+        for dx in -half..=half {
+            out.push(src.sample(p[0] + dx as f32, p[1] + dy as f32));
+        }
+    }
+    normalise(out)
+}
+
+fn normalise(v: &mut [f32]) -> bool {
+    let mean = v.iter().sum::<f32>() / v.len() as f32;
+    let mut n = 0.0;
+    for x in v.iter_mut() {
+        *x -= mean;
+        n += *x * *x;
+    }
+    if n < 1e-8 {
+        return false;
+    }
+    let inv = 1.0 / n.sqrt();
+    v.iter_mut().for_each(|x| *x *= inv);
+    true
+}
+
+/// Reusable buffers of one search (no allocation per tracked point).
+#[derive(Default)]
+pub(crate) struct Scratch {
+    tmpl: Vec<f32>,
+    scores: Vec<f32>,
+}
+
+/// A view prepared for tracking: the smoothed image and integral images of I and I² (f64, so
+/// window sums stay exact enough), which make each candidate window's norm O(1).
+pub(crate) struct Prepared {
+    pub img: Gray,
+    sum: Vec<f64>,
+    sum2: Vec<f64>,
+}
+
+impl Prepared {
+    pub fn new(img: Gray) -> Prepared {
+        let (w, h) = (img.w, img.h);
+        let mut sum = vec![0.0f64; (w + 1) * (h + 1)];
+        let mut sum2 = vec![0.0f64; (w + 1) * (h + 1)];
+        for y in 0..h {
+            let (mut rs, mut rs2) = (0.0f64, 0.0f64);
+            for x in 0..w {
+                let v = img.data[y * w + x] as f64;
+                rs += v;
+                rs2 += v * v;
+                sum[(y + 1) * (w + 1) + x + 1] = sum[y * (w + 1) + x + 1] + rs;
+                sum2[(y + 1) * (w + 1) + x + 1] = sum2[y * (w + 1) + x + 1] + rs2;
+            }
+        }
+        Prepared { img, sum, sum2 }
+    }
+
+    /// Sum and sum of squares over the inclusive pixel box [x0, x1] × [y0, y1].
+    #[inline]
+    fn box_sums(&self, x0: usize, y0: usize, x1: usize, y1: usize) -> (f64, f64) {
+        let w1 = self.img.w + 1;
+        let at = |t: &[f64], x: usize, y: usize| t[y * w1 + x];
+        let s =
+            at(&self.sum, x1 + 1, y1 + 1) - at(&self.sum, x0, y1 + 1) - at(&self.sum, x1 + 1, y0)
+                + at(&self.sum, x0, y0);
+        let s2 = at(&self.sum2, x1 + 1, y1 + 1)
+            - at(&self.sum2, x0, y1 + 1)
+            - at(&self.sum2, x1 + 1, y0)
+            + at(&self.sum2, x0, y0);
+        (s, s2)
+    }
+}
+
+/// Search `s.tmpl` (zero-mean, unit norm, side 2·half+1) in `dst` at integer pixels within
+/// `radius` of `centre`. Because the template has zero mean, Σ T·W equals Σ T·(W − mean W), so
+/// the NCC is that dot product over the window's centred norm from the integral images.
+/// Returns the sub-pixel position and peak score when the peak is strong and unique.
+fn search(
+    dst: &Prepared,
+    centre: [f32; 2],
+    p: &TrackParams,
+    radius: i32,
+    s: &mut Scratch,
+) -> Option<([f32; 2], f32)> {
+    let half = p.half;
+    let side = 2 * radius + 1;
+    let cx = (centre[0] - 0.5).round() as i32;
+    let cy = (centre[1] - 0.5).round() as i32;
+    s.scores.clear();
+    s.scores.resize((side * side) as usize, f32::NAN);
+    let (w, h) = (dst.img.w as i32, dst.img.h as i32);
+    let npx = ((2 * half + 1) * (2 * half + 1)) as f64;
+    let tside = (2 * half + 1) as usize;
+    for oy in -radius..=radius {
+        for ox in -radius..=radius {
+            let (qx, qy) = (cx + ox, cy + oy);
+            if qx - half < 0 || qy - half < 0 || qx + half >= w || qy + half >= h {
+                continue;
+            }
+            let (sm, sm2) = dst.box_sums(
+                (qx - half) as usize,
+                (qy - half) as usize,
+                (qx + half) as usize,
+                (qy + half) as usize,
+            );
+            let var = sm2 - sm * sm / npx;
+            if var < 1e-8 {
+                continue;
+            }
+            let mut dot = 0.0f32;
+            for (dy, trow) in (-half..=half).zip(s.tmpl.chunks_exact(tside)) {
+                let row = ((qy + dy) * w) as usize;
+                let wrow = &dst.img.data[row + (qx - half) as usize..=row + (qx + half) as usize];
+                dot += wrow.iter().zip(trow).map(|(a, b)| a * b).sum::<f32>();
+            }
+            s.scores[((oy + radius) * side + ox + radius) as usize] = dot / var.sqrt() as f32;
+        }
+    }
+    let mut best = (f32::NEG_INFINITY, 0i32, 0i32);
+    for oy in -radius..=radius {
+        for ox in -radius..=radius {
+            let v = s.scores[((oy + radius) * side + ox + radius) as usize];
+            if v > best.0 {
+                best = (v, ox, oy);
+            }
+        }
+    }
+    if best.0 < p.min_ncc || best.1.abs() == radius || best.2.abs() == radius {
+        return None;
+    }
+    let mut second = f32::NEG_INFINITY;
+    for oy in -radius..=radius {
+        for ox in -radius..=radius {
+            if (ox - best.1).abs() <= 2 && (oy - best.2).abs() <= 2 {
+                continue;
+            }
+            let v = s.scores[((oy + radius) * side + ox + radius) as usize];
+            if v > second {
+                second = v;
+            }
+        }
+    }
+    if best.0 - second < p.min_margin {
+        return None;
+    }
+    let start = [(cx + best.1) as f32 + 0.5, (cy + best.2) as f32 + 0.5];
+    let q = refine_lk(&dst.img, start, half, &s.tmpl)?;
+    Some((q, best.0))
+}
+
+/// Sub-pixel refinement of the integer NCC peak by Gauss–Newton (Lucas–Kanade) on the
+/// zero-mean, gain-normalised window: minimises ‖T − Ŵ(q)‖² with Ŵ the centred, unit-norm window
+/// sampled bilinearly at q. Rejects steps that leave the ±1.5 px neighbourhood of the peak.
+fn refine_lk(img: &Gray, start: [f32; 2], half: i32, tmpl: &[f32]) -> Option<[f32; 2]> {
+    let mut q = start;
+    let n = tmpl.len();
+    let mut win = [0.0f32; 441];
+    let mut gx = [0.0f32; 441];
+    let mut gy = [0.0f32; 441];
+    if n > win.len() {
+        return Some(q);
+    }
+    for _ in 0..6 {
+        let mut k = 0;
+        for dy in -half..=half {
+            for dx in -half..=half {
+                let (x, y) = (q[0] + dx as f32, q[1] + dy as f32);
+                win[k] = img.sample(x, y);
+                gx[k] = 0.5 * (img.sample(x + 1.0, y) - img.sample(x - 1.0, y));
+                gy[k] = 0.5 * (img.sample(x, y + 1.0) - img.sample(x, y - 1.0));
+                k += 1;
+            }
+        }
+        let mean = win[..n].iter().sum::<f32>() / n as f32;
+        let (mgx, mgy) = (
+            gx[..n].iter().sum::<f32>() / n as f32,
+            gy[..n].iter().sum::<f32>() / n as f32,
+        );
+        let norm = win[..n]
+            .iter()
+            .map(|v| (v - mean) * (v - mean))
+            .sum::<f32>()
+            .sqrt();
+        if norm < 1e-6 {
+            return None;
+        }
+        let inv = 1.0 / norm;
+        let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        for i in 0..n {
+            let r = (win[i] - mean) * inv - tmpl[i];
+            let (jx, jy) = ((gx[i] - mgx) * inv, (gy[i] - mgy) * inv);
+            a11 += jx * jx;
+            a12 += jx * jy;
+            a22 += jy * jy;
+            b1 += jx * r;
+            b2 += jy * r;
+        }
+        let det = a11 * a22 - a12 * a12;
+        if det.abs() < 1e-12 {
+            return None;
+        }
+        let dx = -(a22 * b1 - a12 * b2) / det;
+        let dy = -(a11 * b2 - a12 * b1) / det;
+        q[0] += dx.clamp(-0.5, 0.5);
+        q[1] += dy.clamp(-0.5, 0.5);
+        if (q[0] - start[0]).abs() > 1.5 || (q[1] - start[1]).abs() > 1.5 {
+            return None;
+        }
+        if dx.abs() < 1e-3 && dy.abs() < 1e-3 {
+            break;
+        }
+    }
+    Some(q)
+}
+
+/// Track `pts` of `src` into `dst` (predicted at pts + shift). Returns, per point, the position
+/// in `dst` when forward–backward consistent.
+pub(crate) fn track_points(
+    src: &Prepared,
+    dst: &Prepared,
+    pts: &[[f32; 2]],
+    shift: [f32; 2],
+    p: &TrackParams,
+) -> Vec<Option<[f32; 2]>> {
+    pts.par_iter()
+        .map_init(Scratch::default, |s, &pt| {
+            if !template(&src.img, pt, p.half, &mut s.tmpl) {
+                return None;
+            }
+            let (q, _) = search(dst, [pt[0] + shift[0], pt[1] + shift[1]], p, p.radius, s)?;
+            if !template(&dst.img, q, p.half, &mut s.tmpl) {
+                return None;
+            }
+            let back_r = (p.fb_tol.ceil() as i32 + 2).max(3);
+            let (b, _) = search(src, pt, p, back_r, s)?;
+            let err = ((b[0] - pt[0]).powi(2) + (b[1] - pt[1]).powi(2)).sqrt();
+            (err <= p.fb_tol).then_some(q)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pattern(w: usize, h: usize, sx: f32, sy: f32) -> Gray {
+        let mut data = vec![0.0; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let (u, v) = (x as f32 + 0.5 - sx, y as f32 + 0.5 - sy);
+                data[y * w + x] = (0.21 * u).sin() * (0.17 * v).cos()
+                    + 0.5 * (0.05 * u + 0.11 * v).sin()
+                    + (0.013 * u * v).sin() * 0.3;
+            }
+        }
+        Gray { w, h, data }
+    }
+
+    #[test]
+    fn tracks_a_subpixel_shift() {
+        let a = Prepared::new(pattern(96, 80, 0.0, 0.0).gaussian(1.0));
+        let b = Prepared::new(pattern(96, 80, 4.3, -2.6).gaussian(1.0));
+        let p = TrackParams {
+            half: 6,
+            radius: 8,
+            neighbours: 1,
+            min_ncc: 0.8,
+            min_margin: 0.0,
+            fb_tol: 1.0,
+        };
+        let pts = [[30.5, 30.5], [50.2, 40.7], [60.0, 25.0]];
+        let out = track_points(&a, &b, &pts, [3.0, -2.0], &p);
+        for (pt, q) in pts.iter().zip(out) {
+            let q = q.expect("tracked");
+            assert!(
+                (q[0] - pt[0] - 4.3).abs() < 0.05 && (q[1] - pt[1] + 2.6).abs() < 0.05,
+                "{pt:?} → {q:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn thumbnail_overlap_finds_the_global_shift() {
+        let a = pattern(192, 128, 0.0, 0.0);
+        let b = pattern(192, 128, 20.0, 8.0);
+        let o = overlaps(&[a, b], 192);
+        assert!(o[0][1].score > 0.9);
+        assert!(
+            (o[0][1].shift[0] - 20.0).abs() <= 4.0 && (o[0][1].shift[1] - 8.0).abs() <= 4.0,
+            "{:?}",
+            o[0][1]
+        );
+    }
+}
