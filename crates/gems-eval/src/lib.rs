@@ -4,7 +4,8 @@
 //!   test-time pose refinement ([`refine::refine_pose`]: one SE(3) correction per view, 100 Adam
 //!   steps, lr 1e-3, L1 vs the ground truth), and score them ([`score_image`]: PSNR, SSIM
 //!   (torchmetrics), LPIPS-Alex when weights are given — otherwise `None`, never a number).
-//! - [`evaluate_trainer`]: the whole protocol on a trained [`gems_train::trainer::Trainer`]:
+//! - [`evaluate_output`]: the whole protocol on a trained [`gems_train::io::TrainOutput`]
+//!   (ground truth from the scene folder via [`eval_data_from_scene`]):
 //!   `deblur` (training views at their trajectory midpoint vs sharp GT), `nvs` (held-out views
 //!   with refinement), `nvs_no_pose_opt` (held-out views at their initial pose) and APE
 //!   ([`ape_of_centres`]: Sim(3) Umeyama of midpoint camera centres to the ground truth, evo's
@@ -13,7 +14,17 @@
 //! - [`tum`]: TUM trajectory files; [`write_trajectories`] writes every view's n virtual poses
 //!   plus the midpoints (and ground truth when known), in the input frame.
 //! - [`report`]: `report.html` with loss/PSNR curves, a trajectory plot and a
-//!   blurry | ours | ground-truth grid (PNG via plotters, no text in the images).
+//!   blurry | ours | ground-truth grid (PNG via plotters, no text in the images); its inputs come
+//!   from [`report_input`].
+//!
+//! Typical use after training (what `gems train` and `gems eval` do):
+//! ```ignore
+//! let data = gems_eval::eval_data_from_scene(&output, &scene)?;
+//! let eval = gems_eval::evaluate_output(&output, &data, &PoseRefineConfig::default(), lpips.as_ref())?;
+//! gems_eval::write_metrics_json(&dir.join("metrics.json"), &eval.metrics)?;
+//! gems_eval::write_trajectories(&dir, &output)?;
+//! gems_eval::write_report(&dir, &gems_eval::report_input(&output, &data, &eval, 4))?;
+//! ```
 
 pub mod evaluate;
 pub mod refine;
@@ -29,7 +40,10 @@ pub use evaluate::{
 };
 pub use refine::{PoseRefineConfig, Refined, refine_pose};
 pub use report::{GridRow, ReportInput, write_report};
-pub use trainer_eval::{EvalData, Evaluation, HeldOutView, evaluate_trainer, write_trajectories};
+pub use trainer_eval::{
+    EvalData, Evaluation, HeldOutView, eval_data_from_scene, evaluate_output, report_input,
+    write_trajectories,
+};
 
 /// Errors of evaluation and export. Every file error names the file.
 #[derive(Debug, thiserror::Error)]

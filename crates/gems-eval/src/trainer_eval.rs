@@ -1,37 +1,42 @@
-//! The evaluation protocol on a trained [`Trainer`], and trajectory export.
+//! The evaluation protocol on a trained result ([`TrainOutput`]), its ground truth from a scene
+//! folder, trajectory export and the report's inputs.
 
 use std::path::Path;
 
+use gems_data::{Scene, Split, load_image};
 use gems_math::Se3;
 use gems_metrics::Lpips;
 use gems_splat::Renderer;
 use gems_train::blur::Intrinsics;
-use gems_train::trainer::Trainer;
+use gems_train::io::TrainOutput;
 
 use crate::EvalError;
 use crate::evaluate::{
     EvalView, MetricsReport, PoseMode, SplitResult, ape_of_centres, evaluate_views,
 };
 use crate::refine::PoseRefineConfig;
+use crate::report::{GridRow, ReportInput};
 use crate::tum::write_tum;
 
-/// A held-out (novel) view: never trained on; its pose is the initial (SfM) one.
+/// A held-out (novel) view: never trained on; its pose is the initial one.
 #[derive(Clone, Debug)]
 pub struct HeldOutView {
     pub name: String,
     pub intrinsics: Intrinsics,
-    /// Initial camera-to-world pose in the trainer's normalised frame.
+    /// Initial camera-to-world pose in the trained result's normalised frame.
     pub c2w_init: Se3,
     /// Sharp ground truth `[H,W,3]`.
     pub gt: Vec<f32>,
 }
 
-/// Ground truth for evaluation.
+/// Images for evaluation and the report.
 #[derive(Clone, Debug, Default)]
 pub struct EvalData {
-    /// Sharp ground truth per training view (same order as `trainer.views`), `None` where
+    /// Sharp ground truth per training view (same order as `output.views`), `None` where
     /// unknown. Empty means none known.
     pub train_gt: Vec<Option<Vec<f32>>>,
+    /// The blurry training inputs (same order; empty if not loaded), for the report grid.
+    pub train_blurry: Vec<Option<Vec<f32>>>,
     pub held_out: Vec<HeldOutView>,
 }
 
@@ -39,40 +44,44 @@ pub struct EvalData {
 #[derive(Clone, Debug)]
 pub struct Evaluation {
     pub metrics: MetricsReport,
-    /// Indices (into `trainer.views`) of the views in `deblur`.
+    /// Indices (into `output.views`) of the views in `deblur`.
     pub deblur_views: Vec<usize>,
     pub deblur: SplitResult,
     pub nvs: SplitResult,
     pub nvs_no_pose_opt: SplitResult,
 }
 
+fn se3(p: &gems_train::io::Pose) -> Se3 {
+    Se3::from(p)
+}
+
 /// Runs the protocol (see the crate docs). APE needs ground-truth poses on at least three
-/// training views (non-collinear centres); otherwise `ape` is `None`.
-pub fn evaluate_trainer(
-    trainer: &Trainer,
+/// training views with non-collinear centres; otherwise `ape` is `None`.
+pub fn evaluate_output(
+    output: &TrainOutput,
     data: &EvalData,
     refine: &PoseRefineConfig,
     lpips: Option<&Lpips>,
 ) -> Result<Evaluation, EvalError> {
-    if !data.train_gt.is_empty() && data.train_gt.len() != trainer.views.len() {
+    if !data.train_gt.is_empty() && data.train_gt.len() != output.views.len() {
         return Err(EvalError::Input(format!(
             "{} training ground-truth entries for {} training views",
             data.train_gt.len(),
-            trainer.views.len()
+            output.views.len()
         )));
     }
-    let gaussians = &trainer.state.gaussians;
+    let gaussians = &output.gaussians;
     let mut renderer = Renderer::new();
     let mut deblur_views = Vec::new();
     let mut train_views = Vec::new();
-    for (i, (view, gt)) in trainer.views.iter().zip(&data.train_gt).enumerate() {
+    for (i, (view, gt)) in output.views.iter().zip(&data.train_gt).enumerate() {
         if let Some(gt) = gt {
             deblur_views.push(i);
             train_views.push(EvalView {
                 name: view.name.clone(),
                 intrinsics: view.intrinsics,
-                c2w_init: view.c2w_init,
-                c2w_eval: trainer.mid_pose(i),
+                c2w_init: se3(&view.c2w_init),
+                c2w_eval: se3(&view.mid_c2w),
                 gt: gt.clone(),
             });
         }
@@ -104,16 +113,27 @@ pub fn evaluate_trainer(
         PoseMode::Refine(*refine),
         lpips,
     )?;
-    let ape = trainer_ape(trainer);
+    let (est, gt) = midpoint_and_gt_centres(output);
+    let ape = if est.len() < 3 {
+        None
+    } else {
+        match ape_of_centres(&est, &gt) {
+            Ok(a) => Some(a),
+            Err(e) => {
+                tracing::warn!("APE not computed: {e}");
+                None
+            }
+        }
+    };
     let metrics = MetricsReport {
         deblur: deblur.scores.clone(),
         nvs: nvs.scores.clone(),
         nvs_no_pose_opt: nvs_no_pose_opt.scores.clone(),
         ape,
-        steps: trainer.state.step,
-        seconds: trainer.state.seconds,
+        steps: output.steps,
+        seconds: output.seconds,
         gaussians: gaussians.len(),
-        init: trainer.init_label.clone(),
+        init: output.init_label.clone(),
     };
     Ok(Evaluation {
         metrics,
@@ -124,34 +144,20 @@ pub fn evaluate_trainer(
     })
 }
 
-/// Midpoint camera centres and ground-truth centres (input frame) of the views with ground truth.
-pub fn midpoint_and_gt_centres(trainer: &Trainer) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
-    let norm = &trainer.normalization;
-    trainer
+/// Midpoint camera centres and ground-truth centres, in the input frame, of the views whose
+/// ground-truth pose is known.
+pub fn midpoint_and_gt_centres(output: &TrainOutput) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+    let norm = &output.normalization;
+    output
         .views
         .iter()
-        .enumerate()
-        .filter_map(|(i, v)| {
-            let gt = v.c2w_gt?;
-            let est = norm.invert_point(&trainer.mid_pose(i).trans);
-            let gt_centre: [f64; 3] = norm.invert_point(&gt.trans).into();
-            Some((<[f64; 3]>::from(est), gt_centre))
+        .filter_map(|v| {
+            let gt = v.c2w_gt.as_ref()?;
+            let est: [f64; 3] = norm.invert_point(&se3(&v.mid_c2w).trans).into();
+            let gt: [f64; 3] = norm.invert_point(&se3(gt).trans).into();
+            Some((est, gt))
         })
         .unzip()
-}
-
-fn trainer_ape(trainer: &Trainer) -> Option<crate::ApeSummary> {
-    let (est, gt) = midpoint_and_gt_centres(trainer);
-    if est.len() < 3 {
-        return None;
-    }
-    match ape_of_centres(&est, &gt) {
-        Ok(a) => Some(a),
-        Err(e) => {
-            tracing::warn!("APE not computed: {e}");
-            None
-        }
-    }
 }
 
 /// A file-name-safe stem of a view name ("images/0001.png" → "0001").
@@ -171,39 +177,37 @@ pub fn file_stem(name: &str) -> String {
         .collect()
 }
 
-fn to_input_frame(trainer: &Trainer, c2w: &Se3) -> Se3 {
-    let (r, t) = trainer.normalization.invert_c2w(&c2w.rot, &c2w.trans);
+fn to_input_frame(output: &TrainOutput, c2w: &Se3) -> Se3 {
+    let (r, t) = output.normalization.invert_c2w(&c2w.rot, &c2w.trans);
     Se3::new(r, t)
 }
 
 /// Writes, in the input frame: `trajectories/<view>.txt` (the n virtual camera-to-world poses,
-/// timestamps u ∈ [0, 1]), `trajectories/mid.txt` (midpoints, timestamp = view index) and, when
-/// known, `trajectories/gt.txt` (same timestamps, so evo associates them 1:1).
-pub fn write_trajectories(dir: &Path, trainer: &Trainer) -> Result<(), EvalError> {
+/// timestamps u_k = linspace(0, 1, n)), `trajectories/mid.txt` (midpoints, timestamp = view
+/// index) and, when known, `trajectories/gt.txt` (same timestamps, so evo associates them 1:1).
+pub fn write_trajectories(dir: &Path, output: &TrainOutput) -> Result<(), EvalError> {
     let tdir = dir.join("trajectories");
-    let n = trainer.cfg.num_virtual_views;
-    let times: Vec<f64> = (0..n)
-        .map(|k| {
-            if n == 1 {
-                0.5
-            } else {
-                k as f64 / (n - 1) as f64
-            }
-        })
-        .collect();
     let mut mids = Vec::new();
     let mut gts = Vec::new();
-    for (i, v) in trainer.views.iter().enumerate() {
-        let poses: Vec<(f64, Se3)> = trainer
-            .virtual_poses(i)
+    for (i, v) in output.views.iter().enumerate() {
+        let n = v.virtual_c2w.len();
+        let poses: Vec<(f64, Se3)> = v
+            .virtual_c2w
             .iter()
-            .zip(&times)
-            .map(|(p, &u)| (u, to_input_frame(trainer, p)))
+            .enumerate()
+            .map(|(k, p)| {
+                let u = if n <= 1 {
+                    0.5
+                } else {
+                    k as f64 / (n - 1) as f64
+                };
+                (u, to_input_frame(output, &se3(p)))
+            })
             .collect();
         write_tum(&tdir.join(format!("{}.txt", file_stem(&v.name))), &poses)?;
-        mids.push((i as f64, to_input_frame(trainer, &trainer.mid_pose(i))));
-        if let Some(gt) = v.c2w_gt {
-            gts.push((i as f64, to_input_frame(trainer, &gt)));
+        mids.push((i as f64, to_input_frame(output, &se3(&v.mid_c2w))));
+        if let Some(gt) = &v.c2w_gt {
+            gts.push((i as f64, to_input_frame(output, &se3(gt))));
         }
     }
     write_tum(&tdir.join("mid.txt"), &mids)?;
@@ -211,4 +215,108 @@ pub fn write_trajectories(dir: &Path, trainer: &Trainer) -> Result<(), EvalError
         write_tum(&tdir.join("gt.txt"), &gts)?;
     }
     Ok(())
+}
+
+fn load_rgb(path: &Path, k: &Intrinsics) -> Result<Vec<f32>, EvalError> {
+    let img = load_image(path)?;
+    if (img.width, img.height) != (k.width, k.height) {
+        return Err(EvalError::Format {
+            path: path.to_path_buf(),
+            reason: format!(
+                "image is {}x{}, the trained view is {}x{}",
+                img.width, img.height, k.width, k.height
+            ),
+        });
+    }
+    Ok(img.data)
+}
+
+/// Ground truth from the scene the result was trained on (opened at the training resolution):
+/// sharp images of the training views matched by name, blurry inputs for the report, and the
+/// held-out views with a sharp ground truth, their initial pose ([`gems_data::View::pose`], the
+/// scene's pose source) mapped into the normalised frame of the result.
+pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalData, EvalError> {
+    let mut data = EvalData::default();
+    for v in &output.views {
+        let sv = scene.views.iter().find(|s| s.name == v.name);
+        let gt = match sv.and_then(|s| s.sharp_gt.as_ref()) {
+            Some(p) => Some(load_rgb(p, &v.intrinsics)?),
+            None => None,
+        };
+        let blurry = match sv {
+            Some(s) => Some(load_rgb(&s.image, &v.intrinsics)?),
+            None => None,
+        };
+        data.train_gt.push(gt);
+        data.train_blurry.push(blurry);
+    }
+    for s in scene.views.iter().filter(|s| s.split == Split::NovelView) {
+        let (Some(gt_path), Some(pose), Some(k)) = (&s.sharp_gt, s.pose, s.intrinsics) else {
+            continue;
+        };
+        let k = Intrinsics {
+            fx: k.fx as f32,
+            fy: k.fy as f32,
+            cx: k.cx as f32,
+            cy: k.cy as f32,
+            width: k.width,
+            height: k.height,
+        };
+        let c2w = Se3::from(pose).inverse();
+        let (r, t) = output.normalization.apply_c2w(&c2w.rot, &c2w.trans);
+        data.held_out.push(HeldOutView {
+            name: s.name.clone(),
+            intrinsics: k,
+            c2w_init: Se3::new(r, t),
+            gt: load_rgb(gt_path, &k)?,
+        });
+    }
+    Ok(data)
+}
+
+/// The report's inputs: curves from the training history, every view's virtual camera centres
+/// (input frame), and a grid of up to `max_rows` deblurred training views.
+pub fn report_input(
+    output: &TrainOutput,
+    data: &EvalData,
+    eval: &Evaluation,
+    max_rows: usize,
+) -> ReportInput {
+    let norm = &output.normalization;
+    let centre = |p: &gems_train::io::Pose| -> [f64; 3] { norm.invert_point(&se3(p).trans).into() };
+    let grid = eval
+        .deblur_views
+        .iter()
+        .zip(&eval.deblur.renders)
+        .filter_map(|(&v, render)| {
+            let view = &output.views[v];
+            let blurry = data.train_blurry.get(v)?.clone()?;
+            Some(GridRow {
+                name: view.name.clone(),
+                width: view.intrinsics.width,
+                height: view.intrinsics.height,
+                blurry,
+                ours: render.clone(),
+                gt: data.train_gt.get(v).cloned().flatten(),
+            })
+        })
+        .take(max_rows)
+        .collect();
+    ReportInput {
+        title: "gems: sharp Gaussian splatting from motion-blurred photos".into(),
+        metrics: eval.metrics.clone(),
+        loss: output.history.loss.clone(),
+        psnr: output.history.psnr.clone(),
+        trajectories: output
+            .views
+            .iter()
+            .map(|v| v.virtual_c2w.iter().map(centre).collect())
+            .collect(),
+        gt_centres: output
+            .views
+            .iter()
+            .map(|v| v.c2w_gt.as_ref().map(centre))
+            .collect(),
+        grid,
+    }
 }
