@@ -93,6 +93,11 @@ pub(crate) struct Proj {
     /// Opacity used for compositing (times the compensation in antialiased mode).
     pub opacity: f64,
     pub color: [f64; 3],
+    /// Half extent (pixels, per axis) of the region where α can reach `alpha_min`: the
+    /// bounding box of the ellipse `σ = ln(opacity / alpha_min)` (with a 1% margin against
+    /// rounding), capped by the radius. Outside it a pixel skips this Gaussian anyway, so the
+    /// fast path may ignore it there without changing any output.
+    pub extent: [f64; 2],
 }
 
 struct Geometry {
@@ -192,6 +197,16 @@ pub(crate) fn project(
     };
     let dir = sub3(mean, cam.center);
     let color = sh::color(g.sh_degree, &g.sh[i], dir);
+    let opacity = prep.opacity * comp;
+    let mut extent = [rx, ry];
+    if s.alpha_min > 0.0 {
+        let thr = (opacity / s.alpha_min as f64).ln() * 1.01 + 1e-3;
+        let e = [(2.0 * thr * a).sqrt(), (2.0 * thr * c).sqrt()];
+        for k in 0..2 {
+            // thr < 0 (NaN root) means α never reaches alpha_min: nothing to draw.
+            extent[k] = if thr > 0.0 { e[k].min(extent[k]) } else { 0.0 };
+        }
+    }
     // Radii above i32 range cannot occur for an on-screen Gaussian worth drawing; saturate.
     let clamp_i32 = |v: f64| v.min(i32::MAX as f64) as i32;
     Some(Proj {
@@ -199,8 +214,9 @@ pub(crate) fn project(
         conic,
         depth: z,
         radii: [clamp_i32(rx), clamp_i32(ry)],
-        opacity: prep.opacity * comp,
+        opacity,
         color,
+        extent,
     })
 }
 

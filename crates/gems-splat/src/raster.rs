@@ -30,6 +30,8 @@ struct Splat {
     opacity: f32,
     color: [f32; 3],
     depth: f32,
+    /// Half extent in pixels of the region where the Gaussian can be drawn.
+    extent: [f32; 2],
 }
 
 /// Per-intersection (or per-splat) screen-space gradient.
@@ -78,10 +80,19 @@ struct TileScratch {
     o: Vec<f32>,
     col: Vec<[f32; 3]>,
     z: Vec<f32>,
+    /// Tile-local pixel box `[x0, x1) × [y0, y1)` the splat can draw into.
+    bx: Vec<[u8; 4]>,
 }
 
 impl TileScratch {
-    fn load(&mut self, splats: &[Splat], ids: &[u32]) {
+    /// Copies the tile's splats; `origin` is the tile's first pixel, `size` the image size.
+    fn load(
+        &mut self,
+        splats: &[Splat],
+        ids: &[u32],
+        origin: (usize, usize),
+        size: (usize, usize),
+    ) {
         self.x.clear();
         self.y.clear();
         self.a.clear();
@@ -90,6 +101,7 @@ impl TileScratch {
         self.o.clear();
         self.col.clear();
         self.z.clear();
+        self.bx.clear();
         for &id in ids {
             let s = &splats[id as usize];
             self.x.push(s.x);
@@ -100,8 +112,30 @@ impl TileScratch {
             self.o.push(s.opacity);
             self.col.push(s.color);
             self.z.push(s.depth);
+            let local = |m: f32, e: f32, o: usize, n: usize| match pixel_span(m, e, n) {
+                Some((lo, hi)) if hi >= o && lo < o + TILE => {
+                    let lo = lo.max(o) - o;
+                    let hi = hi.min(o + TILE - 1) - o + 1;
+                    (lo as u8, hi as u8)
+                }
+                _ => (0, 0),
+            };
+            let (x0, x1) = local(s.x, s.extent[0], origin.0, size.0);
+            let (y0, y1) = local(s.y, s.extent[1], origin.1, size.1);
+            self.bx.push([x0, x1, y0, y1]);
         }
     }
+}
+
+/// Inclusive range of pixel indices in `[0, n)` whose centre is within `extent` of `mean`.
+fn pixel_span(mean: f32, extent: f32, n: usize) -> Option<(usize, usize)> {
+    let lo = (mean - extent - 0.5).ceil();
+    let hi = (mean + extent - 0.5).floor();
+    // Positive phrasing: NaN gives None.
+    if !(hi >= 0.0 && lo <= (n - 1) as f32 && lo <= hi) {
+        return None;
+    }
+    Some((lo.max(0.0) as usize, (hi as usize).min(n - 1)))
 }
 
 /// Settings as f32 constants for the per-pixel loops.
@@ -199,6 +233,7 @@ impl Renderer {
                         opacity: p.opacity as f32,
                         color: p.color.map(|v| v as f32),
                         depth: p.depth as f32,
+                        extent: p.extent.map(|v| v as f32),
                     };
                 }
             });
@@ -211,7 +246,7 @@ impl Renderer {
         self.bins.par_iter_mut().enumerate().for_each(|(c, bins)| {
             let sp = &splats[c * n..(c + 1) * n];
             let rr = &radii[c * n..(c + 1) * n];
-            bin_camera(bins, sp, rr, alpha_min, tiles_x, tiles_y);
+            bin_camera(bins, sp, rr, alpha_min, (w, h));
         });
 
         // Rasterise every (camera, tile).
@@ -247,9 +282,10 @@ impl Renderer {
                     if ids.is_empty() {
                         return;
                     }
-                    scratch.load(&splats[c * n..(c + 1) * n], ids);
                     let (tx, ty) = (tile % tiles_x, tile / tiles_x);
-                    raster_tile_forward(scratch, &rules, tx, ty, w, h, rgb, t, last, depth);
+                    let origin = (tx * TILE, ty * TILE);
+                    scratch.load(&splats[c * n..(c + 1) * n], ids, origin, (w, h));
+                    raster_tile_forward(scratch, &rules, origin, (w, h), rgb, t, last, depth);
                 },
             );
 
@@ -406,12 +442,12 @@ impl Renderer {
                 let px = gt * TILE_PIXELS;
                 let b = &bins[c];
                 let ids = &b.ids[b.offsets[tile] as usize..b.offsets[tile + 1] as usize];
-                scratch.load(&splats[c * n..(c + 1) * n], ids);
+                let origin = (tx * TILE, ty * TILE);
+                scratch.load(&splats[c * n..(c + 1) * n], ids, origin, (w, h));
                 let img = c * h * w;
                 let ctx = TileBackward {
                     rules: &rules,
-                    tx,
-                    ty,
+                    origin,
                     w,
                     h,
                     t_final: &tile_t[px..px + TILE_PIXELS],
@@ -507,9 +543,10 @@ fn bin_camera(
     splats: &[Splat],
     radii: &[[i32; 2]],
     alpha_min: f32,
-    tiles_x: usize,
-    tiles_y: usize,
+    (width, height): (usize, usize),
 ) {
+    let tiles_x = width.div_ceil(TILE);
+    let tiles_y = height.div_ceil(TILE);
     bins.order.clear();
     for (i, (sp, r)) in splats.iter().zip(radii).enumerate() {
         // A Gaussian with opacity below the α cut-off can draw nothing; leaving it out of the
@@ -526,8 +563,15 @@ fn bin_camera(
     bins.offsets.resize(tiles + 1, 0);
     let rect = |i: u32| {
         let sp = &splats[i as usize];
-        let r = radii[i as usize];
-        tile_rect(sp.x, sp.y, r, tiles_x, tiles_y)
+        match (
+            pixel_span(sp.x, sp.extent[0], width),
+            pixel_span(sp.y, sp.extent[1], height),
+        ) {
+            (Some((x0, x1)), Some((y0, y1))) => {
+                (x0 / TILE, x1 / TILE + 1, y0 / TILE, y1 / TILE + 1)
+            }
+            _ => (0, 0, 0, 0),
+        }
     };
     for &(_, i) in &bins.order {
         let (x0, x1, y0, y1) = rect(i);
@@ -557,83 +601,69 @@ fn bin_camera(
     }
 }
 
-/// Tile range `[x0, x1) × [y0, y1)` covered by the box `mean ± radius`.
-fn tile_rect(
-    x: f32,
-    y: f32,
-    r: [i32; 2],
-    tiles_x: usize,
-    tiles_y: usize,
-) -> (usize, usize, usize, usize) {
-    let ts = TILE as f32;
-    let clampf = |v: f32, hi: usize| (v.max(0.0) as usize).min(hi);
-    let x0 = clampf(((x - r[0] as f32) / ts).floor(), tiles_x);
-    let x1 = clampf(((x + r[0] as f32) / ts).ceil(), tiles_x);
-    let y0 = clampf(((y - r[1] as f32) / ts).floor(), tiles_y);
-    let y1 = clampf(((y + r[1] as f32) / ts).ceil(), tiles_y);
-    (x0, x1, y0, y1)
-}
-
-/// Composites one tile front to back.
+/// Composites one tile front to back: splats in depth order, each over the pixels of its box
+/// that are still open, with per-pixel state in the output slices.
 #[allow(clippy::too_many_arguments)]
 fn raster_tile_forward(
     sc: &TileScratch,
     rules: &PixelRules,
-    tx: usize,
-    ty: usize,
-    w: usize,
-    h: usize,
+    origin: (usize, usize),
+    (w, h): (usize, usize),
     rgb: &mut [[f32; 3]],
-    t_out: &mut [f32],
-    last_out: &mut [u32],
-    depth_out: &mut [f32],
+    t: &mut [f32],
+    last: &mut [u32],
+    depth: &mut [f32],
 ) {
-    let len = sc.x.len();
-    for ly in 0..TILE {
-        let y = ty * TILE + ly;
-        if y >= h {
-            break;
+    // Pixels beyond the image edge are never opened.
+    let mut done = [true; TILE_PIXELS];
+    let mut open = 0usize;
+    for ly in 0..TILE.min(h - origin.1) {
+        for lx in 0..TILE.min(w - origin.0) {
+            done[ly * TILE + lx] = false;
+            open += 1;
         }
-        let py = y as f32 + 0.5;
-        for lx in 0..TILE {
-            let x = tx * TILE + lx;
-            if x >= w {
-                break;
-            }
-            let px = x as f32 + 0.5;
-            let mut t = 1.0f32;
-            let mut acc = [0.0f32; 3];
-            let mut d = 0.0f32;
-            let mut last = 0u32;
-            for j in 0..len {
-                let dx = sc.x[j] - px;
-                let dy = sc.y[j] - py;
-                let sigma = 0.5 * (sc.a[j] * dx * dx + sc.c[j] * dy * dy) + sc.b[j] * dx * dy;
+    }
+    for j in 0..sc.x.len() {
+        let [x0, x1, y0, y1] = sc.bx[j].map(usize::from);
+        let (mx, my) = (sc.x[j], sc.y[j]);
+        let (ca, cb, cc, op) = (sc.a[j], sc.b[j], sc.c[j], sc.o[j]);
+        let col = sc.col[j];
+        let z = sc.z[j];
+        for ly in y0..y1 {
+            let dy = my - ((origin.1 + ly) as f32 + 0.5);
+            for lx in x0..x1 {
+                let k = ly * TILE + lx;
+                if done[k] {
+                    continue;
+                }
+                let dx = mx - ((origin.0 + lx) as f32 + 0.5);
+                let sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
                 if sigma < 0.0 {
                     continue;
                 }
-                let alpha = (sc.o[j] * (-sigma).exp()).min(rules.alpha_max);
+                let alpha = (op * (-sigma).exp()).min(rules.alpha_max);
                 if alpha < rules.alpha_min {
                     continue;
                 }
-                let next_t = t * (1.0 - alpha);
+                let tk = t[k];
+                let next_t = tk * (1.0 - alpha);
                 if next_t <= rules.t_min {
-                    break;
+                    done[k] = true;
+                    open -= 1;
+                    continue;
                 }
-                let wgt = alpha * t;
-                let col = sc.col[j];
+                let wgt = alpha * tk;
+                let acc = &mut rgb[k];
                 acc[0] += col[0] * wgt;
                 acc[1] += col[1] * wgt;
                 acc[2] += col[2] * wgt;
-                d += sc.z[j] * wgt;
-                t = next_t;
-                last = j as u32 + 1;
+                depth[k] += z * wgt;
+                t[k] = next_t;
+                last[k] = j as u32 + 1;
             }
-            let k = ly * TILE + lx;
-            rgb[k] = acc;
-            t_out[k] = t;
-            last_out[k] = last;
-            depth_out[k] = d;
+        }
+        if open == 0 {
+            break;
         }
     }
 }
@@ -641,8 +671,7 @@ fn raster_tile_forward(
 /// Inputs of one tile's backward.
 struct TileBackward<'a> {
     rules: &'a PixelRules,
-    tx: usize,
-    ty: usize,
+    origin: (usize, usize),
     w: usize,
     h: usize,
     t_final: &'a [f32],
@@ -653,81 +682,93 @@ struct TileBackward<'a> {
     bg: [f32; 3],
 }
 
-/// Walks each pixel of a tile back to front; writes per-list-entry gradients into `grads` and
-/// returns this tile's background gradient.
+/// Walks a tile's list back to front, each splat over the pixels of its box for which it was
+/// composited (index below the pixel's last contributor), restoring the transmittance and the
+/// colour behind; writes each list entry's summed gradient into `grads` and returns the tile's
+/// background gradient.
 fn raster_tile_backward(
     sc: &TileScratch,
     ctx: &TileBackward<'_>,
     grads: &mut [SplatGrad],
 ) -> [f64; 3] {
     let rules = ctx.rules;
+    let (ox, oy) = ctx.origin;
+    let mut t = [0.0f32; TILE_PIXELS];
+    let mut behind = [[0.0f32; 3]; TILE_PIXELS];
+    let mut vc = [[0.0f32; 3]; TILE_PIXELS];
+    // (d_alpha − d_rgb·bg) · T_final: the part of dL/dα_j common to every splat of a pixel.
+    let mut v_final = [0.0f32; TILE_PIXELS];
     let mut v_bg = [0.0f64; 3];
-    for ly in 0..TILE {
-        let y = ctx.ty * TILE + ly;
-        if y >= ctx.h {
-            break;
-        }
-        let py = y as f32 + 0.5;
-        for lx in 0..TILE {
-            let x = ctx.tx * TILE + lx;
-            if x >= ctx.w {
-                break;
-            }
-            let px = x as f32 + 0.5;
+    let mut max_last = 0u32;
+    for ly in 0..TILE.min(ctx.h - oy) {
+        for lx in 0..TILE.min(ctx.w - ox) {
             let k = ly * TILE + lx;
-            let pix = y * ctx.w + x;
-            let vc = [
+            let pix = (oy + ly) * ctx.w + ox + lx;
+            let v = [
                 ctx.d_rgb[pix * 3],
                 ctx.d_rgb[pix * 3 + 1],
                 ctx.d_rgb[pix * 3 + 2],
             ];
             let va = ctx.d_alpha.map_or(0.0, |da| da[pix]);
-            let t_final = ctx.t_final[k];
+            let tf = ctx.t_final[k];
             for ch in 0..3 {
-                v_bg[ch] += (vc[ch] * t_final) as f64;
+                v_bg[ch] += (v[ch] * tf) as f64;
             }
-            let bg_dot = vc[0] * ctx.bg[0] + vc[1] * ctx.bg[1] + vc[2] * ctx.bg[2];
-            let mut t = t_final;
-            let mut behind = [0.0f32; 3];
-            for j in (0..ctx.last[k] as usize).rev() {
-                let dx = sc.x[j] - px;
-                let dy = sc.y[j] - py;
-                let sigma = 0.5 * (sc.a[j] * dx * dx + sc.c[j] * dy * dy) + sc.b[j] * dx * dy;
+            let bg_dot = v[0] * ctx.bg[0] + v[1] * ctx.bg[1] + v[2] * ctx.bg[2];
+            vc[k] = v;
+            v_final[k] = tf * (va - bg_dot);
+            t[k] = tf;
+            max_last = max_last.max(ctx.last[k]);
+        }
+    }
+    for j in (0..max_last as usize).rev() {
+        let [x0, x1, y0, y1] = sc.bx[j].map(usize::from);
+        let (mx, my) = (sc.x[j], sc.y[j]);
+        let (ca, cb, cc, op) = (sc.a[j], sc.b[j], sc.c[j], sc.o[j]);
+        let col = sc.col[j];
+        let mut gr = SplatGrad::default();
+        for ly in y0..y1 {
+            let dy = my - ((oy + ly) as f32 + 0.5);
+            for lx in x0..x1 {
+                let k = ly * TILE + lx;
+                if j as u32 >= ctx.last[k] {
+                    continue;
+                }
+                let dx = mx - ((ox + lx) as f32 + 0.5);
+                let sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
                 if sigma < 0.0 {
                     continue;
                 }
                 let gauss = (-sigma).exp();
-                let raw = sc.o[j] * gauss;
+                let raw = op * gauss;
                 let alpha = raw.min(rules.alpha_max);
                 if alpha < rules.alpha_min {
                     continue;
                 }
                 let ra = 1.0 / (1.0 - alpha);
-                t *= ra;
-                let wgt = alpha * t;
-                let col = sc.col[j];
-                let gr = &mut grads[j];
+                let tk = t[k] * ra;
+                t[k] = tk;
+                let wgt = alpha * tk;
+                let v = vc[k];
+                let bh = &mut behind[k];
+                let mut v_alpha = v_final[k] * ra;
                 for ch in 0..3 {
-                    gr.color[ch] += wgt * vc[ch];
-                }
-                let mut v_alpha = t_final * ra * (va - bg_dot);
-                for ch in 0..3 {
-                    v_alpha += vc[ch] * (col[ch] * t - behind[ch] * ra);
+                    gr.color[ch] += wgt * v[ch];
+                    v_alpha += v[ch] * (col[ch] * tk - bh[ch] * ra);
+                    bh[ch] += col[ch] * wgt;
                 }
                 if raw <= rules.alpha_max {
                     let v_sigma = -raw * v_alpha;
                     gr.conic[0] += 0.5 * v_sigma * dx * dx;
                     gr.conic[1] += v_sigma * dx * dy;
                     gr.conic[2] += 0.5 * v_sigma * dy * dy;
-                    gr.mean2d[0] += v_sigma * (sc.a[j] * dx + sc.b[j] * dy);
-                    gr.mean2d[1] += v_sigma * (sc.b[j] * dx + sc.c[j] * dy);
+                    gr.mean2d[0] += v_sigma * (ca * dx + cb * dy);
+                    gr.mean2d[1] += v_sigma * (cb * dx + cc * dy);
                     gr.opacity += gauss * v_alpha;
-                }
-                for ch in 0..3 {
-                    behind[ch] += col[ch] * wgt;
                 }
             }
         }
+        grads[j] = gr;
     }
     v_bg
 }
