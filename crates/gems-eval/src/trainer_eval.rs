@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use gems_data::{Scene, Split, load_image};
+use gems_data::{OpenOptions, Scene, Split, load_image, open_scene};
 use gems_math::Se3;
 use gems_metrics::Lpips;
 use gems_splat::Renderer;
@@ -319,4 +319,52 @@ pub fn report_input(
             .collect(),
         grid,
     }
+}
+
+/// Opens the scene a result was trained on at the training resolution: the downscale factor is
+/// inferred from the first training view found in the scene (full-resolution width / trained
+/// width). `hold` overrides the scene's hold-out marker as at training time.
+pub fn open_scene_for(
+    output: &TrainOutput,
+    root: &Path,
+    hold: Option<i64>,
+) -> Result<Scene, EvalError> {
+    let full = open_scene(
+        root,
+        &OpenOptions {
+            downscale: 1,
+            hold,
+            layout: None,
+            create_downscaled: false,
+        },
+    )?;
+    let factor = output
+        .views
+        .iter()
+        .find_map(|v| {
+            let s = full.views.iter().find(|s| s.name == v.name)?;
+            Some(
+                (f64::from(s.width) / f64::from(v.intrinsics.width))
+                    .round()
+                    .max(1.0) as u32,
+            )
+        })
+        .ok_or_else(|| {
+            EvalError::Input(format!(
+                "no training view of the result is in the scene {}",
+                root.display()
+            ))
+        })?;
+    if factor == 1 {
+        return Ok(full);
+    }
+    Ok(open_scene(
+        root,
+        &OpenOptions {
+            downscale: factor,
+            hold,
+            layout: None,
+            create_downscaled: true,
+        },
+    )?)
 }
