@@ -114,18 +114,23 @@ pub fn ssim(
     Ok(total / (3 * height * width) as f64)
 }
 
-/// Per-channel scratch buffers of the f32 SSIM forward/backward.
+/// Per-channel scratch buffers of the f32 SSIM forward/backward. Every pass runs over whole
+/// contiguous rows (taps in the outer loop, pixels in the inner one) so that it vectorises.
 #[derive(Default)]
 struct ChannelScratch {
     x: Vec<f32>,
     y: Vec<f32>,
     /// Horizontal pass, [row][moment (5)][kept col].
     horiz: Vec<f32>,
-    /// ∂S/∂(μx, Σxx, Σxy) on kept pixels, [kept row][3][kept col].
+    /// Vertical pass, [kept row][moment (5)][kept col].
+    vert: Vec<f32>,
+    /// ∂S/∂(μx, Σxx, Σxy) on kept pixels (scaled by 1/N), [kept row][3][kept col].
     dmap: Vec<f32>,
     row_ssim: Vec<f64>,
     /// Vertical adjoint pass, [row][3][kept col].
     back: Vec<f32>,
+    /// Horizontal adjoint pass, [row][3][col].
+    backh: Vec<f32>,
     /// dS̄/dx for this channel, planar [row][col].
     grad: Vec<f32>,
 }
@@ -146,9 +151,11 @@ impl SsimWorkspace {
             x: vec![0.0; height * width],
             y: vec![0.0; height * width],
             horiz: vec![0.0; height * 5 * wi],
+            vert: vec![0.0; hi * 5 * wi],
             dmap: vec![0.0; hi * 3 * wi],
             row_ssim: vec![0.0; hi],
             back: vec![0.0; height * 3 * wi],
+            backh: vec![0.0; height * 3 * width],
             grad: vec![0.0; height * width],
         });
         SsimWorkspace {
@@ -165,6 +172,7 @@ impl SsimWorkspace {
         let (hi, wi) = (h - 2 * RAD, w - 2 * RAD);
         let scale = 1.0 / (3 * hi * wi) as f32;
         let g = self.g;
+        let (c1, c2) = (C1 as f32, C2 as f32);
         let mut total = 0.0;
         for (ch, s) in self.chans.iter_mut().enumerate() {
             s.x.par_chunks_mut(w)
@@ -182,51 +190,65 @@ impl SsimWorkspace {
                 .par_chunks_mut(5 * wi)
                 .enumerate()
                 .for_each(|(r, out)| {
+                    out.fill(0.0);
+                    let (o0, rest) = out.split_at_mut(wi);
+                    let (o1, rest) = rest.split_at_mut(wi);
+                    let (o2, rest) = rest.split_at_mut(wi);
+                    let (o3, o4) = rest.split_at_mut(wi);
                     let (xs, ys) = (&x[r * w..(r + 1) * w], &y[r * w..(r + 1) * w]);
-                    for c in 0..wi {
-                        let mut acc = [0.0f32; 5];
-                        for k in 0..WIN {
-                            let (xv, yv, gk) = (xs[c + k], ys[c + k], g[k]);
+                    for (k, &gk) in g.iter().enumerate() {
+                        let (xk, yk) = (&xs[k..k + wi], &ys[k..k + wi]);
+                        for c in 0..wi {
+                            let (xv, yv) = (xk[c], yk[c]);
                             let (gx, gy) = (gk * xv, gk * yv);
-                            acc[0] += gx;
-                            acc[1] += gy;
-                            acc[2] += gx * xv;
-                            acc[3] += gy * yv;
-                            acc[4] += gx * yv;
-                        }
-                        for (m, a) in acc.iter().enumerate() {
-                            out[m * wi + c] = *a;
+                            o0[c] += gx;
+                            o1[c] += gy;
+                            o2[c] += gx * xv;
+                            o3[c] += gy * yv;
+                            o4[c] += gx * yv;
                         }
                     }
                 });
             let horiz = &s.horiz;
+            s.vert
+                .par_chunks_mut(5 * wi)
+                .enumerate()
+                .for_each(|(r, out)| {
+                    out.fill(0.0);
+                    for (k, &gk) in g.iter().enumerate() {
+                        let src = &horiz[(r + k) * 5 * wi..(r + k + 1) * 5 * wi];
+                        for (o, v) in out.iter_mut().zip(src) {
+                            *o += gk * v;
+                        }
+                    }
+                });
+            let vert = &s.vert;
             s.dmap
                 .par_chunks_mut(3 * wi)
                 .zip(s.row_ssim.par_iter_mut())
                 .enumerate()
                 .for_each(|(r, (out, row_sum))| {
+                    let m = &vert[r * 5 * wi..(r + 1) * 5 * wi];
+                    let (mxs, rest) = m.split_at(wi);
+                    let (mys, rest) = rest.split_at(wi);
+                    let (sxxs, rest) = rest.split_at(wi);
+                    let (syys, sxys) = rest.split_at(wi);
+                    let (d0, rest) = out.split_at_mut(wi);
+                    let (d1, d2) = rest.split_at_mut(wi);
                     let mut sum = 0.0f64;
                     for c in 0..wi {
-                        let mut m = [0.0f32; 5];
-                        for (k, gk) in g.iter().enumerate() {
-                            let base = (r + k) * 5 * wi + c;
-                            for (j, mv) in m.iter_mut().enumerate() {
-                                *mv += gk * horiz[base + j * wi];
-                            }
-                        }
-                        let (mx, my) = (m[0], m[1]);
-                        let (c1, c2) = (C1 as f32, C2 as f32);
+                        let (mx, my) = (mxs[c], mys[c]);
                         let a = 2.0 * mx * my + c1;
-                        let b = 2.0 * (m[4] - mx * my) + c2;
+                        let b = 2.0 * (sxys[c] - mx * my) + c2;
                         let cc = mx * mx + my * my + c1;
-                        let d = (m[2] - mx * mx) + (m[3] - my * my) + c2;
+                        let d = (sxxs[c] - mx * mx) + (syys[c] - my * my) + c2;
                         let cd = cc * d;
                         let ssim = a * b / cd;
                         sum += f64::from(ssim);
-                        out[c] = scale
+                        d0[c] = scale
                             * (2.0 * my * (b - a) / cd - 2.0 * mx * ssim * (1.0 / cc - 1.0 / d));
-                        out[wi + c] = scale * (-ssim / d);
-                        out[2 * wi + c] = scale * (2.0 * a / cd);
+                        d1[c] = scale * (-ssim / d);
+                        d2[c] = scale * (2.0 * a / cd);
                     }
                     *row_sum = sum;
                 });
@@ -249,22 +271,29 @@ impl SsimWorkspace {
                     }
                 });
             let back = &s.back;
-            s.grad.par_chunks_mut(w).enumerate().for_each(|(q, out)| {
-                let row = &back[q * 3 * wi..(q + 1) * 3 * wi];
-                let (xs, ys) = (&x[q * w..(q + 1) * w], &y[q * w..(q + 1) * w]);
-                for (qc, o) in out.iter_mut().enumerate() {
-                    let lo = qc.saturating_sub(WIN - 1);
-                    let hi_c = qc.min(wi - 1);
-                    let mut acc = [0.0f32; 3];
-                    for cp in lo..=hi_c {
-                        let gk = g[qc - cp];
-                        acc[0] += gk * row[cp];
-                        acc[1] += gk * row[wi + cp];
-                        acc[2] += gk * row[2 * wi + cp];
+            s.backh
+                .par_chunks_mut(3 * w)
+                .zip(s.grad.par_chunks_mut(w))
+                .enumerate()
+                .for_each(|(q, (acc, out))| {
+                    acc.fill(0.0);
+                    // Kept column c' saw input column c' + k with tap k.
+                    for m in 0..3 {
+                        let src = &back[(q * 3 + m) * wi..(q * 3 + m + 1) * wi];
+                        let dst = &mut acc[m * w..(m + 1) * w];
+                        for (k, &gk) in g.iter().enumerate() {
+                            for (o, v) in dst[k..k + wi].iter_mut().zip(src) {
+                                *o += gk * v;
+                            }
+                        }
                     }
-                    *o = acc[0] + 2.0 * xs[qc] * acc[1] + ys[qc] * acc[2];
-                }
-            });
+                    let (a0, rest) = acc.split_at(w);
+                    let (a1, a2) = rest.split_at(w);
+                    let (xs, ys) = (&x[q * w..(q + 1) * w], &y[q * w..(q + 1) * w]);
+                    for c in 0..w {
+                        out[c] = a0[c] + 2.0 * xs[c] * a1[c] + ys[c] * a2[c];
+                    }
+                });
         }
         total / (3 * hi * wi) as f64
     }
