@@ -128,10 +128,12 @@ impl SynthScene {
     /// Number of frames rendered per exposure for the event simulator, chosen so the image moves
     /// at most `max_step_px` between frames; a multiple of the blur sub-frame spacing so that every
     /// blur sub-frame is also an event frame (rendered once, used twice).
-    pub fn event_frames_per_exposure(&self, view: usize) -> Option<usize> {
+    pub fn event_frames_per_exposure(&self) -> Option<usize> {
         let ev = self.config.events.as_ref()?;
         let s = self.config.subframes;
-        let blur = self.views[view].blur_px;
+        // The requested blur, not the calibrated one (which may exceed it by a hair): a 2.0004 px
+        // step must not double the frames.
+        let blur = self.config.blur_px;
         Some(if s > 1 {
             let refine = (blur / (s - 1) as f64 / ev.max_step_px).ceil().max(1.0) as usize;
             (s - 1) * refine + 1
@@ -157,7 +159,7 @@ impl SynthScene {
     pub fn render_view(&self, view: usize) -> Result<ViewRender, SynthError> {
         let s = self.config.subframes;
         let k = &self.intrinsics;
-        let event_frames = self.event_frames_per_exposure(view);
+        let event_frames = self.event_frames_per_exposure();
         // Every frame time is an integer key n/den so blur, event and mid-exposure frames that
         // coincide are recognised exactly and rendered once.
         let (sd, ed) = ((s.max(2) - 1), event_frames.map_or(1, |m| m - 1));

@@ -386,6 +386,35 @@ mod tests {
         assert!((t - 2.0).abs() < 1e-6 && n.y == 1.0);
     }
 
+    proptest::proptest! {
+        /// A ray aimed at any interior point of any turned box hits its surface, from outside,
+        /// with a unit normal facing the ray.
+        #[test]
+        fn rays_at_a_box_hit_its_surface(
+            c in proptest::array::uniform3(-3.0f32..3.0),
+            h in proptest::array::uniform3(0.1f32..1.5),
+            yaw in 0.0f32..6.3,
+            aim in proptest::array::uniform3(-0.95f32..0.95),
+            from in proptest::array::uniform3(-1.0f32..1.0),
+        ) {
+            let (centre, half) = (V3::new(c[0], c[1], c[2]), V3::new(h[0], h[1], h[2]));
+            let shape = Shape::Box { centre, half, cos_yaw: yaw.cos(), sin_yaw: yaw.sin() };
+            let to_world = |v: V3| V3::new(yaw.cos() * v.x + yaw.sin() * v.z, v.y, -yaw.sin() * v.x + yaw.cos() * v.z);
+            let target = centre + to_world(V3::new(aim[0] * h[0], aim[1] * h[1], aim[2] * h[2]));
+            let dir_raw = V3::new(from[0], from[1], from[2]);
+            proptest::prop_assume!(dir_raw.norm() > 0.1);
+            let origin = centre + dir_raw.normalized() * 10.0;
+            let d = (target - origin).normalized();
+            let (t, n) = shape.intersect(origin, d).expect("must hit");
+            let local = |v: V3| V3::new(yaw.cos() * v.x - yaw.sin() * v.z, v.y, yaw.sin() * v.x + yaw.cos() * v.z);
+            let p = local(origin + d * t - centre);
+            let q = (p.x / h[0]).abs().max((p.y / h[1]).abs()).max((p.z / h[2]).abs());
+            proptest::prop_assert!((q - 1.0).abs() < 1e-3, "hit point not on the surface: {q}");
+            proptest::prop_assert!(t <= (target - origin).norm() + 1e-3);
+            proptest::prop_assert!((n.norm() - 1.0).abs() < 1e-5 && n.dot(d) < 0.0);
+        }
+    }
+
     #[test]
     fn world_has_objects_and_shadows() {
         let world = World::random(&mut ChaCha8Rng::seed_from_u64(3), 6);

@@ -106,6 +106,10 @@ fn writes_the_gems_layout_readable_by_gems_data_and_gems_events() {
     }
     let info = gems_data::scene_info(&opened, true).unwrap();
     assert!(info.has_gt_poses && !info.has_sfm);
+    let details: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("synth.json")).unwrap()).unwrap();
+    assert_eq!(details["config"]["seed"], 11);
+    assert_eq!(details["summary"]["events"], summary.events);
 
     let rows = gems_data::llff::read_poses_bounds(&out.join("poses_bounds.npy")).unwrap();
     assert_eq!(rows.len(), cfg.views);
@@ -467,5 +471,18 @@ fn events_encode_the_log_intensity_change_of_the_exposure() {
             (n - change).abs() <= c + 1e-4,
             "pixel {i}: events sum {n}, log change {change}"
         );
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
+    /// Calibration reaches the requested blur for any seed and blur strength (no rendering).
+    #[test]
+    fn calibration_hits_any_requested_blur(seed in 0u64..1000, blur in 2.0f64..80.0) {
+        let scene = SynthScene::new(&SynthConfig { seed, blur_px: blur, ..SynthConfig::tiny() }).unwrap();
+        for v in &scene.views {
+            proptest::prop_assert!((v.blur_px / blur - 1.0).abs() < 0.01, "achieved {} for {blur}", v.blur_px);
+            proptest::prop_assert!(v.near > 0.0 && v.near < v.far);
+        }
     }
 }
