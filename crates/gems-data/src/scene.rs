@@ -20,9 +20,11 @@
 //!
 //! # Poses
 //! [`View::pose`] is the pose to start from (SfM model, else LLFF file, else transforms.json);
-//! [`View::gt_pose`] / [`View::gt_subframe_poses`] are ground truth, only set when the manifest
-//! declares `poses: ground_truth` (sub-frames also for ExBluRF's file, which is ground truth by
-//! definition). All are world-to-camera, OpenCV axes.
+//! [`View::gt_pose`] is ground truth: from `poses_bounds.npy` only when the manifest declares
+//! `poses: ground_truth`, or from PRISM3D's `sparse/0/images_gt.{bin,txt}` (matched by name).
+//! [`View::gt_subframe_poses`] come from `poses_bounds_subframes.npy` (ground truth by
+//! definition, as in ExBluRF). All are world-to-camera, OpenCV axes; ground truth may live in a
+//! different world frame than the SfM poses (align before comparing, e.g. Umeyama).
 //!
 //! # Downscaling
 //! With [`OpenOptions::downscale`] `= f > 1` images are read from `images_<f>/` (and
@@ -486,6 +488,36 @@ fn attach_subframes(views: &mut [View], path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// PRISM3D keeps ground-truth poses as a second COLMAP image list, `sparse/0/images_gt.bin`
+/// (or `.txt`); they are matched to views by file name.
+fn attach_prism3d_gt(views: &mut [View], sfm_dir: &Path) -> Result<()> {
+    let bin = sfm_dir.join("images_gt.bin");
+    let txt = sfm_dir.join("images_gt.txt");
+    let images = if bin.is_file() {
+        colmap::parse_images_bin(&crate::fsutil::read_bytes(&bin)?)
+            .map_err(|e| DataError::from_format(&bin, e))?
+    } else if txt.is_file() {
+        colmap::parse_images_txt(&crate::fsutil::read_text(&txt)?)
+            .map_err(|e| DataError::from_format(&txt, e))?
+    } else {
+        return Ok(());
+    };
+    let path = if bin.is_file() { bin } else { txt };
+    for img in &images {
+        let pose = img.pose();
+        if !pose.is_finite() {
+            return Err(DataError::format(
+                &path,
+                format!("image {} ({}) has a non-finite pose", img.id, img.name),
+            ));
+        }
+        if let Some(v) = views.iter_mut().find(|v| v.name == img.name) {
+            v.gt_pose = Some(pose);
+        }
+    }
+    Ok(())
+}
+
 fn open_gems(
     root: &Path,
     opts: &OpenOptions,
@@ -570,6 +602,9 @@ fn open_gems(
         if !ground_truth && sfm.is_none() {
             pose_source = PoseSource::Llff;
         }
+    }
+    if let Some(dir) = &sfm_dir {
+        attach_prism3d_gt(&mut views, dir)?;
     }
     let sub = root.join("poses_bounds_subframes.npy");
     if sub.is_file() {

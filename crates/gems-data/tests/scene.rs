@@ -148,6 +148,36 @@ fn gems_layout_split_ground_truth_and_sfm() {
 }
 
 #[test]
+fn prism3d_images_gt_gives_ground_truth_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    make_gems(root, 4, 8, 8, 6);
+    std::fs::remove_file(root.join(gems_data::manifest::MANIFEST_FILE)).unwrap();
+    // PRISM3D's GT list, in a different order and with different ids than the SfM model.
+    let gt: Vec<Image> = [2usize, 0]
+        .iter()
+        .map(|&i| Image::from_pose(100 + i as u32, 1, &format!("{i:03}.png"), &pose(i + 7)))
+        .collect();
+    std::fs::write(
+        root.join("sparse/0/images_gt.bin"),
+        colmap::images_to_bin(&gt),
+    )
+    .unwrap();
+    let s = open_scene(root, &OpenOptions::default()).unwrap();
+    assert!(close(s.views[2].gt_pose.as_ref().unwrap(), &pose(9)));
+    assert!(close(s.views[0].gt_pose.as_ref().unwrap(), &pose(7)));
+    assert!(
+        s.views[1].gt_pose.is_none(),
+        "no manifest: poses_bounds.npy is not ground truth"
+    );
+    std::fs::write(root.join("sparse/0/images_gt.bin"), b"\x01").unwrap();
+    let e = open_scene(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("images_gt.bin"), "{e}");
+}
+
+#[test]
 fn hold_option_and_no_hold() {
     let dir = tempfile::tempdir().unwrap();
     make_gems(dir.path(), 6, 4, 8, 6);
