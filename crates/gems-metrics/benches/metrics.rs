@@ -31,3 +31,15 @@ fn eval_ssim_400x270(bencher: divan::Bencher) {
     let (r, t) = (image(h, w, 1), image(h, w, 2));
     bencher.bench(|| gems_metrics::ssim(&r, &t, h, w).unwrap());
 }
+
+#[divan::bench(sample_count = 5)]
+fn lpips_alex_400x270(bencher: divan::Bencher) {
+    let (h, w) = (270, 400);
+    let (r, t) = (image(h, w, 1), image(h, w, 2));
+    let weights = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/testdata/metrics/lpips_alex_random_weights.safetensors"
+    );
+    let net = gems_metrics::Lpips::load(&[weights]).unwrap();
+    bencher.bench_local(|| net.distance(&r, &t, h, w).unwrap());
+}
