@@ -68,7 +68,14 @@ pub fn generate_with_progress(
     with_staging_dir(out_dir, |tmp| {
         let mut renders = Vec::with_capacity(scene.views.len());
         for v in 0..scene.views.len() {
-            renders.push(scene.render_view(v)?);
+            let r = scene.render_view(v)?;
+            tracing::debug!(
+                view = v,
+                blur_px = scene.views[v].blur_px,
+                events = r.events.as_ref().map_or(0, |e| e.len()),
+                "rendered"
+            );
+            renders.push(r);
             progress(v + 1, scene.views.len());
         }
         let subframe_poses: Vec<Vec<CameraPose>> = (0..scene.views.len())
@@ -346,6 +353,13 @@ fn write_scene(
     let text =
         serde_json::to_string_pretty(&details).map_err(|e| SynthError::Config(e.to_string()))?;
     write_text(&dir.join("synth.json"), &text)?;
+    tracing::info!(
+        "synth scene {}: {n} views {}x{}, {} events",
+        final_dir.display(),
+        k.width,
+        k.height,
+        n_events
+    );
     Ok(summary)
 }
 
