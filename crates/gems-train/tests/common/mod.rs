@@ -116,6 +116,8 @@ pub struct BlurScene {
     /// Ground-truth sharp mid-exposure renders, `[H,W,3]` each.
     pub sharp: Vec<Vec<f32>>,
     pub gt_mid: Vec<Se3>,
+    /// Exposure motion of each view: c2w(s) = mid·Exp(s·m), s ∈ [−½, ½].
+    pub gt_motion: Vec<[f64; 6]>,
     pub gt: Gaussians,
 }
 
@@ -139,6 +141,7 @@ pub fn blur_scene(
         views: vec![],
         sharp: vec![],
         gt_mid: vec![],
+        gt_motion: vec![],
         gt: gt.clone(),
     };
     let mut g = gt.clone();
@@ -199,11 +202,13 @@ pub fn blur_scene(
         });
         out.sharp.push(sharp);
         out.gt_mid.push(mid);
+        out.gt_motion.push(m.into());
     }
     out
 }
 
-/// Initial Gaussians: the true means jittered, grey, with 3-NN scales (an "SfM" point cloud).
+/// Initial Gaussians: the true means jittered, with their true colours and 3-NN scales (what an
+/// SfM point cloud provides).
 pub fn init_gaussians(scene: &BlurScene, jitter: f32, seed: u64) -> Gaussians {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let pts: Vec<[f32; 3]> = scene
@@ -212,13 +217,16 @@ pub fn init_gaussians(scene: &BlurScene, jitter: f32, seed: u64) -> Gaussians {
         .iter()
         .map(|m| std::array::from_fn(|i| m[i] + jitter * (rng.random::<f32>() * 2.0 - 1.0)))
         .collect();
-    let cols = vec![[0.5f32; 3]; pts.len()];
-    gems_train::init::from_points(
-        &pts,
-        &cols,
-        &gems_train::config::InitConfig::default(),
-        3,
-        &mut rng,
-    )
-    .unwrap()
+    let cols: Vec<[f32; 3]> = scene
+        .gt
+        .sh
+        .iter()
+        .map(|s| s[0].map(|c| (c * 0.2820948 + 0.5).clamp(0.0, 1.0)))
+        .collect();
+    // The test cloud is sparse (one point per true Gaussian), so start from scales near the truth.
+    let cfg = gems_train::config::InitConfig {
+        scale_factor: 0.5,
+        ..Default::default()
+    };
+    gems_train::init::from_points(&pts, &cols, &cfg, 3, &mut rng).unwrap()
 }
