@@ -26,7 +26,7 @@ pub(crate) enum Column {
 }
 
 impl Column {
-    fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         match self {
             Column::Int(v) => v.len(),
             Column::Float(v) => v.len(),
@@ -201,7 +201,14 @@ pub fn read_events_npy(path: &Path, opts: &ReadOptions) -> Result<EventStream, E
         }
         Column::Float(_) => time_column(Column::Float(column(tc)), opts, path)?,
     };
-    build_stream(path, opts, t, &column(xc), &column(yc), &column(3))
+    build_stream(
+        path,
+        opts,
+        t,
+        Column::Float(column(xc)),
+        Column::Float(column(yc)),
+        Column::Float(column(3)),
+    )
 }
 
 /// Reads the `t`, `x`, `y`, `p` arrays of an npz archive from any seekable reader.
@@ -212,14 +219,26 @@ pub(crate) fn read_npz_from<R: Read + Seek>(
 ) -> Result<EventStream, EventError> {
     let mut npz = NpzArchive::new(reader)
         .map_err(|e| EventError::format(path, format!("not a valid .npz archive: {e}")))?;
-    let mut get = |name: &str| -> Result<Column, EventError> {
-        let npy = npz
-            .by_name(name)
-            .map_err(|e| EventError::format(path, format!("array '{name}': {e}")))?
-            .ok_or_else(|| {
-                EventError::format(path, format!("missing array '{name}' (need t, x, y, p)"))
-            })?;
-        let (shape, col) = read_column(npy, path, name)?;
+    let mut get = |name: &str| -> Result<Option<(Vec<u64>, Column)>, EventError> {
+        // Read the member into memory first: npyz decodes element by element, which is slow on
+        // the unbuffered zip stream and fast on a byte slice.
+        let mut entry = match npz.zip_archive().by_name(&format!("{name}.npy")) {
+            Ok(e) => e,
+            Err(npyz::zip::result::ZipError::FileNotFound) => return Ok(None),
+            Err(e) => return Err(EventError::format(path, format!("array '{name}': {e}"))),
+        };
+        let mut bytes = Vec::with_capacity((entry.size() as usize).min(1 << 30));
+        entry
+            .read_to_end(&mut bytes)
+            .map_err(|e| EventError::format(path, format!("array '{name}': {e}")))?;
+        let npy = NpyFile::new(&bytes[..])
+            .map_err(|e| EventError::format(path, format!("array '{name}': {e}")))?;
+        read_column(npy, path, name).map(Some)
+    };
+    let mut vector = |name: &str| -> Result<Column, EventError> {
+        let (shape, col) = get(name)?.ok_or_else(|| {
+            EventError::format(path, format!("missing array '{name}' (need t, x, y, p)"))
+        })?;
         if shape.len() != 1 {
             return Err(EventError::format(
                 path,
@@ -228,14 +247,13 @@ pub(crate) fn read_npz_from<R: Read + Seek>(
         }
         Ok(col)
     };
-    let (t, x, y, p) = (get("t")?, get("x")?, get("y")?, get("p")?);
+    let (t, x, y, p) = (vector("t")?, vector("x")?, vector("y")?, vector("p")?);
     let t = time_column(t, opts, path)?;
     let mut opts = *opts;
     if opts.size.is_none() {
         // our writer stores the sensor size; other producers do not
         let mut scalar = |name: &str| -> Option<u16> {
-            let npy = npz.by_name(name).ok()??;
-            match read_column(npy, path, name).ok()?.1 {
+            match get(name).ok()??.1 {
                 Column::Int(v) if v.len() == 1 => u16::try_from(v[0]).ok(),
                 _ => None,
             }
@@ -244,7 +262,7 @@ pub(crate) fn read_npz_from<R: Read + Seek>(
             opts.size = Some((w, h));
         }
     }
-    build_stream(path, &opts, t, &x.as_f64(), &y.as_f64(), &p.as_f64())
+    build_stream(path, &opts, t, x, y, p)
 }
 
 /// Writes `events` as an uncompressed `.npz` with `t` (int64 µs), `x`, `y` (uint16), `p` (int8 ±1),

@@ -2,6 +2,7 @@
 
 use std::path::Path;
 
+use crate::npy::Column;
 use crate::{EventError, EventStream};
 
 /// Unit of timestamps stored in a file.
@@ -101,14 +102,14 @@ pub fn read_events(path: &Path, opts: &ReadOptions) -> Result<EventStream, Event
     }
 }
 
-/// Validates float coordinate/polarity columns and assembles a stream (shared by npy/npz/text).
+/// Validates coordinate/polarity columns and assembles a stream (shared by npy/npz).
 pub(crate) fn build_stream(
     path: &Path,
     opts: &ReadOptions,
     t: Vec<i64>,
-    x: &[f64],
-    y: &[f64],
-    p: &[f64],
+    x: Column,
+    y: Column,
+    p: Column,
 ) -> Result<EventStream, EventError> {
     let n = t.len();
     if x.len() != n || y.len() != n || p.len() != n {
@@ -122,33 +123,58 @@ pub(crate) fn build_stream(
             ),
         ));
     }
-    let coord = |v: &[f64], what: &str| -> Result<Vec<u16>, EventError> {
-        let mut out = Vec::with_capacity(v.len());
-        for (i, &a) in v.iter().enumerate() {
-            if !(a >= 0.0 && a <= f64::from(u16::MAX - 1) && a.fract() == 0.0) {
-                return Err(EventError::format(
-                    path,
-                    format!("event {i}: {what} = {a} is not a pixel index"),
-                ));
-            }
-            out.push(a as u16);
+    let bad = |i: usize, what: &str, v: String| {
+        EventError::format(
+            path,
+            format!("event {i}: {what} = {v} is not a pixel index"),
+        )
+    };
+    let coord = |c: Column, what: &str| -> Result<Vec<u16>, EventError> {
+        match c {
+            Column::Int(v) => v
+                .iter()
+                .enumerate()
+                .map(|(i, &a)| {
+                    u16::try_from(a)
+                        .ok()
+                        .filter(|&a| a < u16::MAX)
+                        .ok_or_else(|| bad(i, what, a.to_string()))
+                })
+                .collect(),
+            Column::Float(v) => v
+                .iter()
+                .enumerate()
+                .map(|(i, &a)| {
+                    if a >= 0.0 && a <= f64::from(u16::MAX - 1) && a.fract() == 0.0 {
+                        Ok(a as u16)
+                    } else {
+                        Err(bad(i, what, a.to_string()))
+                    }
+                })
+                .collect(),
         }
-        Ok(out)
     };
     let (xs, ys) = (coord(x, "x")?, coord(y, "y")?);
-    let mut ps = Vec::with_capacity(n);
-    for (i, &a) in p.iter().enumerate() {
-        ps.push(match a {
-            1.0 => 1,
-            0.0 | -1.0 => -1,
-            v => {
-                return Err(EventError::format(
-                    path,
-                    format!("event {i}: polarity {v} is not 0/1 or ±1"),
-                ));
-            }
-        });
-    }
+    let pol = |i: usize, a: f64| match a {
+        1.0 => Ok(1),
+        0.0 | -1.0 => Ok(-1),
+        v => Err(EventError::format(
+            path,
+            format!("event {i}: polarity {v} is not 0/1 or ±1"),
+        )),
+    };
+    let ps = match p {
+        Column::Int(v) => v
+            .iter()
+            .enumerate()
+            .map(|(i, &a)| pol(i, a as f64))
+            .collect::<Result<Vec<i8>, _>>()?,
+        Column::Float(v) => v
+            .iter()
+            .enumerate()
+            .map(|(i, &a)| pol(i, a))
+            .collect::<Result<Vec<i8>, _>>()?,
+    };
     let (w, h) = resolve_size(path, opts.size, &xs, &ys)?;
     EventStream::from_columns(w, h, t, xs, ys, ps)
         .map_err(|e| EventError::format(path, e.to_string()))
