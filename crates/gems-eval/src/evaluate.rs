@@ -9,10 +9,18 @@ use serde::{Deserialize, Serialize};
 use crate::EvalError;
 use crate::refine::{PoseRefineConfig, refine_pose};
 
+/// JSON has no infinity: serde_json writes the PSNR of a perfect render as `null`; read it back
+/// as +∞.
+fn null_as_infinity<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
+}
+
 /// Metrics of one image.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ImageScore {
     pub name: String,
+    /// dB; +∞ (`null` in JSON) for a perfect render.
+    #[serde(deserialize_with = "null_as_infinity")]
     pub psnr: f64,
     pub ssim: f64,
     /// Absent (null) when no LPIPS weights were given.
@@ -22,6 +30,7 @@ pub struct ImageScore {
 /// Mean metrics of a split plus the per-image values.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SplitScores {
+    #[serde(deserialize_with = "null_as_infinity")]
     pub psnr: f64,
     pub ssim: f64,
     /// Mean LPIPS, or null when any image lacks it (no weights given).
@@ -146,7 +155,8 @@ pub fn evaluate_views(
     let mut per_image = Vec::with_capacity(views.len());
     let mut renders = Vec::with_capacity(views.len());
     let mut poses = Vec::with_capacity(views.len());
-    for v in views {
+    for (i, v) in views.iter().enumerate() {
+        tracing::info!(view = %v.name, "evaluating view {}/{}", i + 1, views.len());
         let k = &v.intrinsics;
         let (h, w) = (k.height as usize, k.width as usize);
         if v.gt.len() != h * w * 3 {

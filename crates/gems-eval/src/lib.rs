@@ -18,7 +18,7 @@
 //!   from [`report_input`].
 //!
 //! Typical use after training (what `gems train` and `gems eval` do):
-//! ```ignore
+//! ```text
 //! let data = gems_eval::eval_data_from_scene(&output, &scene)?;
 //! let eval = gems_eval::evaluate_output(&output, &data, &PoseRefineConfig::default(), lpips.as_ref())?;
 //! gems_eval::write_metrics_json(&dir.join("metrics.json"), &eval.metrics)?;

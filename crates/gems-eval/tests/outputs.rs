@@ -90,6 +90,12 @@ fn metrics_json_round_trip_and_keys() {
     for key in ["rmse", "mean", "median", "std", "max"] {
         assert!(v["ape"][key].is_number(), "missing ape.{key}");
     }
+    // A perfect render's infinite PSNR survives the JSON round trip (written as null).
+    let mut perfect = report.clone();
+    perfect.deblur.as_mut().unwrap().per_image[0].psnr = f64::INFINITY;
+    perfect.deblur.as_mut().unwrap().psnr = f64::INFINITY;
+    write_metrics_json(&path, &perfect).unwrap();
+    assert_eq!(read_metrics_json(&path).unwrap(), perfect);
     // A broken file gives an error naming it.
     std::fs::write(&path, "{ not json").unwrap();
     assert!(
