@@ -85,7 +85,10 @@ impl So3 {
     /// drifted from orthonormality (f32 round trips, file inputs).
     pub fn from_matrix_orthonormalized(m: &Matrix3<f64>) -> Self {
         let svd = m.svd(true, true);
-        let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+        let (u, vt) = (
+            svd.u.expect("U was requested"),
+            svd.v_t.expect("Vᵀ was requested"),
+        );
         let mut d = Matrix3::identity();
         if (u * vt).determinant() < 0.0 {
             d[(2, 2)] = -1.0;
