@@ -118,3 +118,26 @@ fn statistics_follow_evo() {
     assert_eq!((s.min, s.max), (1.0, 4.0));
     assert_eq!(error_stats(&[5.0, 1.0, 3.0]).unwrap().median, 3.0);
 }
+
+use proptest::prelude::*;
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+    #[test]
+    fn umeyama_recovers_random_similarities(
+        rot in prop::array::uniform3(-3.0f64..3.0),
+        trans in prop::array::uniform3(-10.0f64..10.0),
+        log_scale in -3.0f64..3.0,
+        seed in 0u64..10_000,
+    ) {
+        let phi = Vector3::from(rot);
+        prop_assume!(phi.norm() < 3.1);
+        let sim = Sim3 { scale: log_scale.exp(), rot: So3::exp(&phi).0, trans: Vector3::from(trans) };
+        let src = points(12, seed);
+        let dst: Vec<[f64; 3]> = src.iter().map(|p| sim.act(p)).collect();
+        let est = umeyama(&src, &dst, true).unwrap();
+        prop_assert!((est.scale / sim.scale - 1.0).abs() < 1e-9);
+        prop_assert!((est.rot - sim.rot).abs().max() < 1e-9);
+        prop_assert!((est.trans - sim.trans).norm() < 1e-8 * (1.0 + sim.trans.norm()));
+    }
+}
