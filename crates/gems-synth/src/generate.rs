@@ -263,10 +263,10 @@ fn write_scene(
     write_hold_marker(dir, i64::from(cfg.hold))?;
     let manifest = Manifest {
         description: Some(format!(
-            "{}x{}, {n} views, {:.1} px blur, {} sub-frames, seed {}",
+            "{}x{}, {n} views, {:.1} px mean blur, {} sub-frames, seed {}",
             k.width,
             k.height,
-            cfg.blur_px,
+            blur_px.iter().sum::<f64>() / n as f64,
             subframe_poses.first().map_or(0, Vec::len),
             cfg.seed
         )),
