@@ -143,6 +143,75 @@ fn read_column<R: Read>(
     Ok((shape, col))
 }
 
+/// Decodes an in-memory `.npy` 1-D little-endian numeric array straight from its bytes (one
+/// pass, no per-element reader calls); other layouts go through npyz's generic reader.
+fn read_column_bytes(
+    bytes: &[u8],
+    path: &Path,
+    name: &str,
+) -> Result<(Vec<u64>, Column), EventError> {
+    let npy = NpyFile::new(bytes)
+        .map_err(|e| EventError::format(path, format!("array '{name}': {e}")))?;
+    let shape = npy.shape().to_vec();
+    let fast = match npy.dtype() {
+        npyz::DType::Plain(ts) if shape.len() == 1 && ts.endianness() != npyz::Endianness::Big => {
+            Some((ts.type_char(), ts.size_field()))
+        }
+        _ => None,
+    };
+    let Some((kind, size)) = fast else {
+        return read_column(npy, path, name);
+    };
+    let n = shape[0] as usize;
+    let data = npy.into_inner();
+    let need = n.checked_mul(size as usize).filter(|&b| b <= data.len());
+    if need.is_none() {
+        return Err(EventError::format(
+            path,
+            format!("array '{name}': data shorter than its shape {shape:?}"),
+        ));
+    }
+    macro_rules! ints {
+        ($t:ty) => {
+            Column::Int(
+                data.chunks_exact(std::mem::size_of::<$t>())
+                    .take(n)
+                    .map(|c| i64::from(<$t>::from_le_bytes(c.try_into().expect("chunk size"))))
+                    .collect(),
+            )
+        };
+    }
+    let col = match (kind, size) {
+        (TypeChar::Bool | TypeChar::Uint, 1) => ints!(u8),
+        (TypeChar::Int, 1) => ints!(i8),
+        (TypeChar::Int, 2) => ints!(i16),
+        (TypeChar::Uint, 2) => ints!(u16),
+        (TypeChar::Int, 4) => ints!(i32),
+        (TypeChar::Uint, 4) => ints!(u32),
+        (TypeChar::Int, 8) => ints!(i64),
+        (TypeChar::Float, 4) => Column::Float(
+            data.chunks_exact(4)
+                .take(n)
+                .map(|c| f64::from(f32::from_le_bytes(c.try_into().expect("chunk size"))))
+                .collect(),
+        ),
+        (TypeChar::Float, 8) => Column::Float(
+            data.chunks_exact(8)
+                .take(n)
+                .map(|c| f64::from_le_bytes(c.try_into().expect("chunk size")))
+                .collect(),
+        ),
+        _ => {
+            return read_column(
+                NpyFile::new(bytes).map_err(|e| EventError::format(path, e.to_string()))?,
+                path,
+                name,
+            );
+        }
+    };
+    Ok((shape, col))
+}
+
 /// Converts a time column to µs: integers use `opts.int_time_unit`, floats `opts.float_time_unit`.
 fn time_column(col: Column, opts: &ReadOptions, path: &Path) -> Result<Vec<i64>, EventError> {
     match col {
@@ -231,9 +300,7 @@ pub(crate) fn read_npz_from<R: Read + Seek>(
         entry
             .read_to_end(&mut bytes)
             .map_err(|e| EventError::format(path, format!("array '{name}': {e}")))?;
-        let npy = NpyFile::new(&bytes[..])
-            .map_err(|e| EventError::format(path, format!("array '{name}': {e}")))?;
-        read_column(npy, path, name).map(Some)
+        read_column_bytes(&bytes, path, name).map(Some)
     };
     let mut vector = |name: &str| -> Result<Column, EventError> {
         let (shape, col) = get(name)?.ok_or_else(|| {
