@@ -41,8 +41,8 @@ pub use evaluate::{
 pub use refine::{PoseRefineConfig, Refined, refine_pose};
 pub use report::{GridRow, ReportInput, write_report};
 pub use trainer_eval::{
-    EvalData, Evaluation, HeldOutView, eval_data_from_scene, evaluate_output, report_input,
-    write_trajectories,
+    EvalData, Evaluation, HeldOutView, eval_data_from_scene, evaluate_output, open_scene_for,
+    report_input, write_trajectories,
 };
 
 /// Errors of evaluation and export. Every file error names the file.

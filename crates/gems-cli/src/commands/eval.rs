@@ -1,9 +1,94 @@
-//! `gems eval` (owned by the stage that implements it; replaced when that stage lands).
+//! `gems eval`: re-run the evaluation protocol on a trained output folder (deblurring at the
+//! trajectory midpoints, novel views with and without test-time pose refinement, APE) and
+//! rewrite `metrics.json`, `trajectories/` and `report.html` there. The work is in `gems-eval`.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use gems_eval::{
+    PoseRefineConfig, evaluate_output, write_metrics_json, write_report, write_trajectories,
+};
 
 /// Arguments of `gems eval`.
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Output folder of `gems train` (holds model.json + model.safetensors).
+    pub output: PathBuf,
+    /// The scene folder it was trained on (ground-truth images and held-out views).
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// LPIPS weights: a safetensors file in the lpips layout, or the two official PyTorch files
+    /// (lpips `alex.pth` and torchvision `alexnet-owt-7be5be79.pth`). Without them LPIPS is
+    /// reported as absent.
+    #[arg(long, num_args = 1..)]
+    pub lpips: Vec<PathBuf>,
+    /// Hold-out interval overriding the scene's `hold=<n>` marker (as used for training).
+    #[arg(long)]
+    pub hold: Option<i64>,
+    /// Adam steps of the test-time pose refinement of each held-out view.
+    #[arg(long, default_value_t = 100)]
+    pub refine_steps: usize,
+    /// Learning rate of the test-time pose refinement.
+    #[arg(long, default_value_t = 1e-3)]
+    pub refine_lr: f64,
+    /// Rows of the blurry | ours | ground-truth grid in the report.
+    #[arg(long, default_value_t = 4)]
+    pub grid_rows: usize,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`gems eval` is not available in this build yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let output = gems_train::io::TrainOutput::load(&args.output).with_context(|| {
+        format!(
+            "cannot read the trained result in {}",
+            args.output.display()
+        )
+    })?;
+    let scene = gems_eval::open_scene_for(&output, &args.scene, args.hold)?;
+    let data = gems_eval::eval_data_from_scene(&output, &scene)?;
+    let lpips = if args.lpips.is_empty() {
+        tracing::warn!("no --lpips weights given: LPIPS will be reported as absent");
+        None
+    } else {
+        Some(gems_metrics::Lpips::load(&args.lpips)?)
+    };
+    let refine = PoseRefineConfig {
+        steps: args.refine_steps,
+        lr: args.refine_lr,
+        ..Default::default()
+    };
+    tracing::info!(
+        deblur = data.train_gt.iter().flatten().count(),
+        held_out = data.held_out.len(),
+        "evaluating"
+    );
+    let eval = evaluate_output(&output, &data, &refine, lpips.as_ref())?;
+    write_metrics_json(&args.output.join("metrics.json"), &eval.metrics)?;
+    write_trajectories(&args.output, &output)?;
+    let report = write_report(
+        &args.output,
+        &gems_eval::report_input(&output, &data, &eval, args.grid_rows),
+    )?;
+    let fmt = |s: &Option<gems_eval::SplitScores>| {
+        s.as_ref().map_or_else(
+            || "n/a".to_string(),
+            |s| {
+                let lpips = s
+                    .lpips
+                    .map_or_else(|| "absent".to_string(), |l| format!("{l:.4}"));
+                format!("PSNR {:.2} SSIM {:.4} LPIPS {lpips}", s.psnr, s.ssim)
+            },
+        )
+    };
+    println!("deblur:          {}", fmt(&eval.metrics.deblur));
+    println!("nvs:             {}", fmt(&eval.metrics.nvs));
+    println!("nvs_no_pose_opt: {}", fmt(&eval.metrics.nvs_no_pose_opt));
+    match eval.metrics.ape {
+        Some(a) => println!(
+            "APE rmse {:.5} mean {:.5} median {:.5} std {:.5} max {:.5}",
+            a.rmse, a.mean, a.median, a.std, a.max
+        ),
+        None => println!("APE: n/a (no ground-truth poses)"),
+    }
+    println!("report: {}", report.display());
+    Ok(())
 }
