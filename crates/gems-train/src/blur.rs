@@ -97,6 +97,7 @@ pub struct BlurWorkspace {
     pub d_rgb: Vec<f32>,
 }
 
+#[allow(clippy::too_many_arguments)]
 /// Renders the blurred image of a view into `ws.blurred` (and keeps the cameras in `ws.cams`).
 pub fn render_blurred<R: Rasterizer + ?Sized>(
     r: &mut R,

@@ -80,6 +80,9 @@ pub fn from_points<R: Rng + ?Sized>(
     Ok(g)
 }
 
+/// Points and their RGB colours.
+pub type PointCloud = (Vec<[f32; 3]>, Vec<[f32; 3]>);
+
 /// `count` random points with random colours inside the cameras' frustums, at depths uniform in
 /// [near, far] (in world units): a random camera, a random pixel, a random depth, unprojected.
 pub fn random_in_frustums<R: Rng + ?Sized>(
@@ -88,7 +91,7 @@ pub fn random_in_frustums<R: Rng + ?Sized>(
     near: f32,
     far: f32,
     rng: &mut R,
-) -> Result<(Vec<[f32; 3]>, Vec<[f32; 3]>), TrainError> {
+) -> Result<PointCloud, TrainError> {
     if cams.is_empty() {
         return Err(TrainError::Input(
             "random initialisation needs at least one camera".into(),

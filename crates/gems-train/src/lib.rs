@@ -11,6 +11,7 @@
 //! * [`trainer`] — [`trainer::Trainer`]: the joint optimisation loop and its checkpointable state.
 //! * [`io`] — atomic files, checkpoints (safetensors + JSON) and [`io::TrainOutput`], the
 //!   trained result that gems-eval consumes.
+//! * [`prepare`] — scene folder + init mode (colmap / gt / gt-noisy) → [`trainer::TrainInput`].
 //! * [`init`] — Gaussians from SfM points (3-NN scales) or random points in the camera frustums.
 pub mod adam;
 pub mod blur;
@@ -19,6 +20,7 @@ pub mod init;
 pub mod io;
 pub mod mcmc;
 pub mod normalize;
+pub mod prepare;
 pub mod trainer;
 
 pub use config::{TrainConfig, TrajectoryKind};

@@ -253,9 +253,9 @@ pub fn inject_noise<R: Rng + ?Sized>(g: &mut Gaussians, scale: f32, min_opacity:
         // Σε = R (S² (Rᵀ ε)).
         let rt_eps: [f32; 3] = std::array::from_fn(|a| (0..3).map(|b| r[b][a] * eps[b]).sum());
         let scaled: [f32; 3] = std::array::from_fn(|a| s2[a] * rt_eps[a]);
-        for a in 0..3 {
-            let d: f32 = (0..3).map(|b| r[a][b] * scaled[b]).sum();
-            g.means[i][a] += gate * d;
+        for (m, row) in g.means[i].iter_mut().zip(&r) {
+            let d: f32 = row.iter().zip(&scaled).map(|(a, b)| a * b).sum();
+            *m += gate * d;
         }
     }
 }

@@ -514,11 +514,11 @@ fn add_regularizers(cfg: &TrainConfig, g: &Gaussians, grads: &mut Gradients) -> 
         value += (or * s) as f64 / n as f64;
         grads.opacity_logits[i] += or * s * (1.0 - s) / n as f32;
     }
-    for (i, ls) in g.log_scales.iter().enumerate() {
-        for a in 0..3 {
-            let e = ls[a].exp();
+    for (ls, gr) in g.log_scales.iter().zip(grads.log_scales.iter_mut()) {
+        for (l, d) in ls.iter().zip(gr.iter_mut()) {
+            let e = l.exp();
             value += (sr * e) as f64 / (3 * n) as f64;
-            grads.log_scales[i][a] += sr * e / (3 * n) as f32;
+            *d += sr * e / (3 * n) as f32;
         }
     }
     value as f32

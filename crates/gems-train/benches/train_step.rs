@@ -1,0 +1,95 @@
+//! Seconds per training step at 400×270 with 100k Gaussians and n = 15 virtual cameras
+//! (render 15 views in one call, mean, fused loss, backward through the blur model, Adam on
+//! every group, pose accumulation, SGLD noise). MCMC refinement is outside the timed window
+//! (cap_max = N, so growth is a no-op; relocation runs only every 100 steps in the defaults).
+
+use gems_math::{Se3, Vector6};
+use gems_splat::{Gaussians, RenderSettings, Renderer};
+use gems_train::TrainConfig;
+use gems_train::blur::{Intrinsics, camera_from_c2w};
+use gems_train::normalize::Normalization;
+use gems_train::trainer::{TrainInput, TrainView, Trainer};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn main() {
+    divan::main();
+}
+
+const N: usize = 100_000;
+
+fn scene() -> Gaussians {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut g = Gaussians::with_degree(3);
+    for _ in 0..N {
+        let m = [
+            (rng.random::<f32>() - 0.5) * 4.0,
+            (rng.random::<f32>() - 0.5) * 3.0,
+            2.0 + rng.random::<f32>() * 2.0,
+        ];
+        let mut sh = [[0.0f32; 3]; 16];
+        for c in sh.iter_mut() {
+            *c = std::array::from_fn(|_| (rng.random::<f32>() - 0.5) * 0.3);
+        }
+        let s = (0.005 + 0.02 * rng.random::<f32>()).ln();
+        g.push(
+            m,
+            std::array::from_fn(|_| rng.random::<f32>()),
+            [s; 3],
+            0.0,
+            sh,
+        );
+    }
+    g
+}
+
+fn trainer() -> Trainer {
+    let g = scene();
+    let k = Intrinsics {
+        fx: 360.0,
+        fy: 360.0,
+        cx: 200.0,
+        cy: 135.0,
+        width: 400,
+        height: 270,
+    };
+    let c2w = Se3::exp(&Vector6::zeros());
+    let target = Renderer::new()
+        .forward(
+            &g,
+            &[camera_from_c2w(&c2w, &k)],
+            &[[0.0; 3]],
+            &RenderSettings::default(),
+        )
+        .unwrap()
+        .rgb;
+    let mut cfg = TrainConfig {
+        steps: 7000,
+        ..TrainConfig::default()
+    };
+    cfg.mcmc.cap_max = N;
+    let view = TrainView {
+        name: "bench".into(),
+        image: target,
+        intrinsics: k,
+        c2w_init: c2w * Se3::exp(&Vector6::from_element(1e-3)),
+        c2w_gt: None,
+    };
+    let input = TrainInput {
+        views: vec![view],
+        gaussians: g,
+        normalization: Normalization::identity(),
+        scene_scale: 1.0,
+        init_label: "bench".into(),
+    };
+    let mut t = Trainer::new(cfg, input).unwrap();
+    // Start past the SH ramp (all 16 coefficients active, as in most of a run), off a refine step.
+    t.state.step = 3001;
+    t
+}
+
+#[divan::bench(sample_count = 3, sample_size = 1)]
+fn step_400x270_100k_n15(bencher: divan::Bencher) {
+    let mut t = trainer();
+    bencher.bench_local(|| t.step().unwrap());
+}

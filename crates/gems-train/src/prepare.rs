@@ -1,0 +1,248 @@
+//! From a scene folder to a [`TrainInput`]: initial poses and points by initialisation mode,
+//! blurry images, PRISM3D normalisation and initial Gaussians.
+//!
+//! Modes:
+//! * `colmap` — poses and points of a COLMAP sparse model (the scene's `sparse/0`, or a path).
+//! * `gt` — ground-truth mid-exposure poses.
+//! * `gt-noisy` — ground truth perturbed by seeded noise (σ in normalised units; labelled so).
+//! * SfM (`gems-init`) is run by the caller (`gems sfm` writes `sparse/0`, then `colmap` mode).
+//!
+//! Points: the chosen model's points (ground-truth modes use `gt/sparse/0` when the scene has
+//! it, as `gems synth` writes); without points, random points inside the camera frustums.
+
+use std::path::{Path, PathBuf};
+
+use gems_data::{Pose as DataPose, Scene, colmap::SparseModel, load_image};
+use gems_math::{Matrix3, Se3, Vector3, Vector6};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+use crate::TrainError;
+use crate::blur::{Intrinsics, camera_from_c2w};
+use crate::config::TrainConfig;
+use crate::init::{from_points, random_in_frustums};
+use crate::normalize::Normalization;
+use crate::trainer::{TrainInput, TrainView};
+
+/// Where the initial poses (and points) come from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum InitMode {
+    /// A COLMAP model: the scene's own (`None`) or the one at this folder.
+    Colmap(Option<PathBuf>),
+    /// Ground-truth poses.
+    Gt,
+    /// Ground-truth poses with Gaussian noise (normalised units: translation σ, rotation σ rad).
+    GtNoisy {
+        translation_std: f64,
+        rotation_std: f64,
+    },
+}
+
+impl InitMode {
+    /// Label recorded in the output and shown in the report.
+    pub fn label(&self) -> String {
+        match self {
+            InitMode::Colmap(None) => "colmap (scene sparse model)".into(),
+            InitMode::Colmap(Some(p)) => format!("colmap ({})", p.display()),
+            InitMode::Gt => "gt (ground-truth poses)".into(),
+            InitMode::GtNoisy {
+                translation_std,
+                rotation_std,
+            } => {
+                format!(
+                    "gt-noisy (ground truth + noise, sigma_t {translation_std}, sigma_r {rotation_std} rad)"
+                )
+            }
+        }
+    }
+}
+
+fn c2w_of(p: &DataPose) -> Se3 {
+    Se3::from_arrays(&p.rotation, &p.translation).inverse()
+}
+
+fn read_points(model: &SparseModel) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    let pts = model
+        .points
+        .iter()
+        .map(|p| p.xyz.map(|v| v as f32))
+        .collect();
+    let cols = model
+        .points
+        .iter()
+        .map(|p| p.rgb.map(|c| c as f32 / 255.0))
+        .collect();
+    (pts, cols)
+}
+
+fn load_model(dir: &Path) -> Result<SparseModel, TrainError> {
+    gems_data::colmap::read_model(dir)
+        .map_err(|e| TrainError::Input(format!("reading COLMAP model {}: {e}", dir.display())))
+}
+
+/// Builds the training input of `scene` for `mode`.
+pub fn prepare_input(
+    scene: &Scene,
+    mode: &InitMode,
+    cfg: &TrainConfig,
+) -> Result<TrainInput, TrainError> {
+    let model = match mode {
+        InitMode::Colmap(Some(dir)) => Some(load_model(dir)?),
+        InitMode::Colmap(None) => Some(scene.sfm.clone().ok_or_else(|| {
+            TrainError::Input(format!(
+                "{}: no sparse model (run `gems sfm` or use --init gt)",
+                scene.root.display()
+            ))
+        })?),
+        InitMode::Gt | InitMode::GtNoisy { .. } => {
+            let gt_dir = scene.root.join("gt").join("sparse").join("0");
+            if gt_dir.is_dir() {
+                Some(load_model(&gt_dir)?)
+            } else {
+                None
+            }
+        }
+    };
+    let mut raw = Vec::new();
+    for v in scene.train_views() {
+        let pose = match mode {
+            InitMode::Colmap(Some(_)) => model
+                .as_ref()
+                .and_then(|m| m.image_by_name(&v.name))
+                .map(|i| i.pose()),
+            InitMode::Colmap(None) => v.pose,
+            InitMode::Gt | InitMode::GtNoisy { .. } => v.gt_pose,
+        };
+        let Some(pose) = pose else {
+            return Err(TrainError::Input(format!(
+                "view {} ({}) has no initial pose for {}",
+                v.name,
+                v.image.display(),
+                mode.label()
+            )));
+        };
+        let k = v.intrinsics.ok_or_else(|| {
+            TrainError::Input(format!(
+                "view {} ({}) has no intrinsics",
+                v.name,
+                v.image.display()
+            ))
+        })?;
+        let img = load_image(&v.image).map_err(|e| TrainError::Input(e.to_string()))?;
+        if (img.width, img.height) != (k.width, k.height) {
+            return Err(TrainError::Input(format!(
+                "{}: image is {}x{} but its intrinsics are for {}x{}",
+                v.image.display(),
+                img.width,
+                img.height,
+                k.width,
+                k.height
+            )));
+        }
+        let intr = Intrinsics {
+            fx: k.fx as f32,
+            fy: k.fy as f32,
+            cx: k.cx as f32,
+            cy: k.cy as f32,
+            width: k.width,
+            height: k.height,
+        };
+        raw.push((
+            v.name.clone(),
+            img.data,
+            intr,
+            c2w_of(&pose),
+            v.gt_pose.as_ref().map(c2w_of),
+        ));
+    }
+    if raw.is_empty() {
+        return Err(TrainError::Input(format!(
+            "{}: no training views",
+            scene.root.display()
+        )));
+    }
+
+    let poses: Vec<(Matrix3<f64>, Vector3<f64>)> =
+        raw.iter().map(|r| (r.3.rot, r.3.trans)).collect();
+    let norm = if cfg.normalize.enabled {
+        Normalization::from_cameras(&poses, cfg.normalize.scale_factor)
+    } else {
+        Normalization::identity()
+    };
+    let to_norm = |p: &Se3| {
+        let (r, t) = norm.apply_c2w(&p.rot, &p.trans);
+        Se3::new(r, t)
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x006e_6f69_7365);
+    let mut views = Vec::with_capacity(raw.len());
+    for (name, image, intrinsics, c2w, gt) in raw {
+        let mut c2w_init = to_norm(&c2w);
+        if let InitMode::GtNoisy {
+            translation_std,
+            rotation_std,
+        } = mode
+        {
+            let nt = Normal::new(0.0, *translation_std)
+                .map_err(|e| TrainError::Config(e.to_string()))?;
+            let nr =
+                Normal::new(0.0, *rotation_std).map_err(|e| TrainError::Config(e.to_string()))?;
+            let xi = Vector6::from_fn(|i, _| {
+                if i < 3 {
+                    nt.sample(&mut rng)
+                } else {
+                    nr.sample(&mut rng)
+                }
+            });
+            c2w_init = c2w_init * Se3::exp(&xi);
+        }
+        views.push(TrainView {
+            name,
+            image,
+            intrinsics,
+            c2w_init,
+            c2w_gt: gt.as_ref().map(to_norm),
+        });
+    }
+    let centre = views
+        .iter()
+        .fold(Vector3::zeros(), |a, v| a + v.c2w_init.trans)
+        / views.len() as f64;
+    let max_dist = views
+        .iter()
+        .map(|v| (v.c2w_init.trans - centre).norm())
+        .fold(0.0, f64::max);
+    let scene_scale = (cfg.normalize.scene_scale_margin * max_dist).max(1e-6) as f32;
+
+    let (points, colors) = match model.as_ref().map(read_points) {
+        Some((p, c)) if p.len() >= 2 => {
+            let p = p
+                .iter()
+                .map(|x| {
+                    let q = norm.apply_point(&Vector3::new(x[0] as f64, x[1] as f64, x[2] as f64));
+                    [q.x as f32, q.y as f32, q.z as f32]
+                })
+                .collect();
+            (p, c)
+        }
+        _ => {
+            let cams: Vec<_> = views
+                .iter()
+                .map(|v| camera_from_c2w(&v.c2w_init, &v.intrinsics))
+                .collect();
+            let (near, far) = (
+                cfg.init.random_near * scene_scale,
+                cfg.init.random_far * scene_scale,
+            );
+            random_in_frustums(&cams, cfg.init.random_points, near, far, &mut rng)?
+        }
+    };
+    let gaussians = from_points(&points, &colors, &cfg.init, cfg.sh_degree, &mut rng)?;
+    Ok(TrainInput {
+        views,
+        gaussians,
+        normalization: norm,
+        scene_scale,
+        init_label: mode.label(),
+    })
+}
