@@ -8,13 +8,17 @@
 //! every writer is atomic (temp file + rename).
 //!
 //! # Entry points
-//! - [`open_scene`] → [`Scene`] (views with split, intrinsics, poses, ground truth, SfM model,
+//! - [`open_scene`] (or [`open_scene_undistorted`]) → [`Scene`] (views with split, intrinsics, poses, ground truth, SfM model,
 //!   events) for any supported layout; [`scene_info`] summarises it (serde, for `gems info`).
 //! - [`colmap`]: `read_model` / `write_model` (binary byte-exact, text).
 //! - [`llff`]: `read_poses_bounds` / `write_poses_bounds`, `read_subframes` / `write_subframes`.
 //! - [`nerfstudio`]: `read_transforms` / `write_transforms`.
 //! - [`manifest`]: `gems_scene.json` and the `hold=<n>` marker (for scene generators).
 //! - [`image`]: `load_image`, `save_png`, `downscale_area`, [`ImageCache`].
+//! - [`undistort`]: undistortion maps for SIMPLE_RADIAL / RADIAL / OPENCV cameras.
+//!
+//! Fuzz targets for the binary parsers live in `fuzz/` (its own workspace; see `fuzz/README.md`:
+//! `RUSTC_BOOTSTRAP=1 cargo fuzz run colmap_images_bin`).
 
 pub mod colmap;
 pub mod error;
@@ -28,6 +32,7 @@ pub mod nerfstudio;
 mod npy;
 pub mod pose;
 pub mod scene;
+pub mod undistort;
 
 pub use error::{DataError, FormatError, Result};
 pub use fsutil::write_atomic;
@@ -35,4 +40,6 @@ pub use image::{ImageCache, ImageRgb, load_image, save_png};
 pub use info::{SceneInfo, scene_info};
 pub use manifest::{Manifest, ManifestPoses, write_hold_marker, write_manifest};
 pub use pose::{Intrinsics, Pose};
-pub use scene::{Layout, OpenOptions, PoseSource, Scene, Split, View, open_scene};
+pub use scene::{
+    Layout, OpenOptions, PoseSource, Scene, Split, View, open_scene, open_scene_undistorted,
+};

@@ -30,6 +30,11 @@
 //! With [`OpenOptions::downscale`] `= f > 1` images are read from `images_<f>/` (and
 //! `images_test_<f>/`), which are created with an area filter when missing; existing files are
 //! never overwritten. Intrinsics are rescaled to the actual image size of each view.
+//!
+//! # Distortion
+//! SfM cameras with non-zero distortion are an error in [`open_scene`]; [`open_scene_undistorted`]
+//! instead replaces each view's image and sharp ground truth by undistorted copies in
+//! `<folder>_undistorted/` (made when missing, never overwritten; see [`crate::undistort`]).
 
 use std::path::{Path, PathBuf};
 
@@ -234,8 +239,21 @@ pub fn detect_layout(root: &Path) -> Result<Layout> {
     Ok(layout)
 }
 
-/// Opens the scene in `root` (see the module docs for layouts and rules).
+/// Opens the scene in `root` (see the module docs for layouts and rules). SfM cameras with
+/// distortion are an error (see [`open_scene_undistorted`]).
 pub fn open_scene(root: &Path, opts: &OpenOptions) -> Result<Scene> {
+    open(root, opts, false)
+}
+
+/// Like [`open_scene`], but views whose SfM camera has distortion (SIMPLE_RADIAL, RADIAL,
+/// OPENCV) get undistorted copies of their image and sharp ground truth in
+/// `<folder>_undistorted/` (made when missing, never overwritten) and the pinhole intrinsics of
+/// those copies.
+pub fn open_scene_undistorted(root: &Path, opts: &OpenOptions) -> Result<Scene> {
+    open(root, opts, true)
+}
+
+fn open(root: &Path, opts: &OpenOptions, undistort: bool) -> Result<Scene> {
     let layout = match opts.layout {
         Some(l) => l,
         None => detect_layout(root)?,
@@ -248,7 +266,7 @@ pub fn open_scene(root: &Path, opts: &OpenOptions) -> Result<Scene> {
     let hold = (hold >= 1).then_some(hold);
     let events = find_event_files(root);
     let mut scene = match layout {
-        Layout::Gems => open_gems(root, opts, hold, manifest.as_ref())?,
+        Layout::Gems => open_gems(root, opts, hold, manifest.as_ref(), undistort)?,
         Layout::Llff => open_llff(root, opts, hold)?,
         Layout::Nerfstudio => open_nerfstudio(root, opts)?,
     };
@@ -407,9 +425,20 @@ fn find_sfm_dir(root: &Path) -> Option<PathBuf> {
         .find(|d| colmap::detect_format(d).is_some())
 }
 
-/// Attaches SfM poses and intrinsics to views by file name.
-fn attach_sfm(views: &mut [View], model: &SparseModel, dir: &Path) -> Result<()> {
+/// Attaches SfM poses and intrinsics to views by file name. Cameras with non-zero distortion
+/// are an error unless `undistort`, in which case every view's image (and sharp ground truth)
+/// is replaced by an undistorted copy in a sibling `<folder>_undistorted/` (made when missing,
+/// never overwritten) and gets the pinhole intrinsics of that copy.
+fn attach_sfm(views: &mut [View], model: &SparseModel, dir: &Path, undistort: bool) -> Result<()> {
+    let cams_file = dir.join(format!(
+        "cameras.{}",
+        match colmap::detect_format(dir) {
+            Some(colmap::ModelFormat::Text) => "txt",
+            _ => "bin",
+        }
+    ));
     let mut registered = 0;
+    let mut needs_undistort = false;
     for v in views.iter_mut() {
         let Some(img) = model.image_by_name(&v.name) else {
             continue;
@@ -418,21 +447,21 @@ fn attach_sfm(views: &mut [View], model: &SparseModel, dir: &Path) -> Result<()>
         let cam = model
             .camera(img.camera_id)
             .expect("read_model checked camera references");
-        let cams_file = dir.join(format!(
-            "cameras.{}",
-            match colmap::detect_format(dir) {
-                Some(colmap::ModelFormat::Text) => "txt",
-                _ => "bin",
-            }
-        ));
-        let k = cam.intrinsics().map_err(|msg| DataError::Unsupported {
-            path: cams_file,
-            msg,
-        })?;
-        // The model may have been computed on a resized copy (e.g. the Deblur-NeRF "ball"
-        // scene): rescale to this view's actual size.
-        v.intrinsics = Some(k.resized(v.width, v.height));
         v.pose = Some(img.pose());
+        match cam.intrinsics() {
+            // The model may have been computed on a resized copy (e.g. the Deblur-NeRF "ball"
+            // scene): rescale to this view's actual size.
+            Ok(k) => v.intrinsics = Some(k.resized(v.width, v.height)),
+            Err(msg) if !undistort || crate::undistort::UndistortMap::new(cam, 1, 1).is_err() => {
+                return Err(DataError::Unsupported {
+                    path: cams_file,
+                    msg: format!(
+                        "{msg}; or open the scene with undistortion (open_scene_undistorted)"
+                    ),
+                });
+            }
+            Err(_) => needs_undistort = true,
+        }
     }
     if registered < views.len() {
         tracing::warn!(
@@ -441,6 +470,72 @@ fn attach_sfm(views: &mut [View], model: &SparseModel, dir: &Path) -> Result<()>
             views = views.len(),
             "some views are not registered in the SfM model and have no pose"
         );
+    }
+    if needs_undistort {
+        undistort_views(views, model, &cams_file)?;
+    }
+    Ok(())
+}
+
+/// `<parent>/<folder>_undistorted/<file>` for an image path.
+fn undistorted_path(p: &Path) -> PathBuf {
+    let dir = p.parent().unwrap_or(Path::new("."));
+    let folder = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    dir.with_file_name(format!("{folder}_undistorted"))
+        .join(p.file_name().unwrap_or_default())
+}
+
+fn undistort_views(views: &mut [View], model: &SparseModel, cams_file: &Path) -> Result<()> {
+    use crate::undistort::UndistortMap;
+    use std::collections::HashMap;
+    // One map per (camera, image size), shared by every view that uses it.
+    let mut maps: HashMap<(u32, u32, u32), UndistortMap> = HashMap::new();
+    let mut jobs: Vec<(usize, (u32, u32, u32))> = Vec::new();
+    for (i, v) in views.iter().enumerate() {
+        let Some(img) = model.image_by_name(&v.name) else {
+            continue;
+        };
+        let cam = model.camera(img.camera_id).expect("checked by read_model");
+        let key = (cam.id, v.width, v.height);
+        if let std::collections::hash_map::Entry::Vacant(e) = maps.entry(key) {
+            let map = UndistortMap::new(cam, v.width, v.height).map_err(|msg| {
+                DataError::Unsupported {
+                    path: cams_file.to_path_buf(),
+                    msg,
+                }
+            })?;
+            e.insert(map);
+        }
+        jobs.push((i, key));
+    }
+    tracing::info!(
+        views = jobs.len(),
+        "undistorting images (missing copies only)"
+    );
+    let maps = maps;
+    let mut work: Vec<(PathBuf, PathBuf, &UndistortMap)> = Vec::new();
+    for &(i, key) in &jobs {
+        let v = &views[i];
+        for p in std::iter::once(&v.image).chain(v.sharp_gt.as_ref()) {
+            work.push((p.clone(), undistorted_path(p), &maps[&key]));
+        }
+    }
+    work.par_iter()
+        .filter(|(_, dst, _)| !dst.exists())
+        .map(|(src, dst, map)| {
+            let img = load_image(src)?;
+            let out = map.apply(&img).map_err(|msg| DataError::format(src, msg))?;
+            save_image_auto(dst, &out)
+        })
+        .collect::<Result<Vec<()>>>()?;
+    for &(i, key) in &jobs {
+        let v = &mut views[i];
+        v.image = undistorted_path(&v.image);
+        v.sharp_gt = v.sharp_gt.as_deref().map(undistorted_path);
+        v.intrinsics = Some(maps[&key].intrinsics());
     }
     Ok(())
 }
@@ -523,6 +618,7 @@ fn open_gems(
     opts: &OpenOptions,
     hold: Option<i64>,
     manifest: Option<&Manifest>,
+    undistort: bool,
 ) -> Result<Scene> {
     let images = view_images(root, "images", opts)?;
     let dims = sizes(&images)?;
@@ -579,7 +675,7 @@ fn open_gems(
     let sfm = match &sfm_dir {
         Some(dir) => {
             let m = colmap::read_model(dir)?;
-            attach_sfm(&mut views, &m, dir)?;
+            attach_sfm(&mut views, &m, dir, undistort)?;
             pose_source = PoseSource::Sfm;
             Some(m)
         }

@@ -178,6 +178,52 @@ fn prism3d_images_gt_gives_ground_truth_by_name() {
 }
 
 #[test]
+fn distorted_cameras_are_undistorted_into_copies() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    make_gems(root, 3, 8, 16, 12);
+    let mut m = colmap::read_model(&root.join("sparse/0")).unwrap();
+    m.cameras[0] = Camera {
+        id: 1,
+        model: CameraModel::SimpleRadial,
+        width: 32,
+        height: 24,
+        params: vec![30.0, 16.0, 12.0, -0.2],
+    };
+    colmap::write_model(&root.join("sparse/0"), &m, ModelFormat::Binary).unwrap();
+    // A pre-existing copy is kept as it is.
+    write_img(&root.join("images_undistorted/001.png"), 16, 12, 77);
+    let kept = std::fs::read(root.join("images_undistorted/001.png")).unwrap();
+    let s = open_scene_undistorted(root, &OpenOptions::default()).unwrap();
+    assert_eq!(
+        std::fs::read(root.join("images_undistorted/001.png")).unwrap(),
+        kept
+    );
+    let v = &s.views[2];
+    assert_eq!(v.image, root.join("images_undistorted/002.png"));
+    assert_eq!(
+        v.sharp_gt.as_deref(),
+        Some(root.join("images_test_undistorted/002.png").as_path())
+    );
+    let k = v.intrinsics.unwrap();
+    assert_eq!(
+        (k.fx, k.fy, k.cx, k.cy, k.width),
+        (15.0, 15.0, 8.0, 6.0, 16)
+    );
+    // The copy is the undistortion of the original.
+    let cam = &m.cameras[0];
+    let map = gems_data::undistort::UndistortMap::new(cam, 16, 12).unwrap();
+    let want = map
+        .apply(&load_image(&root.join("images/002.png")).unwrap())
+        .unwrap();
+    let got = load_image(&v.image).unwrap();
+    for (a, b) in got.data.iter().zip(&want.data) {
+        assert!((a - b).abs() <= 0.5 / 255.0 + 1e-6);
+    }
+    assert_ne!(got, load_image(&root.join("images/002.png")).unwrap());
+}
+
+#[test]
 fn hold_option_and_no_hold() {
     let dir = tempfile::tempdir().unwrap();
     make_gems(dir.path(), 6, 4, 8, 6);
@@ -460,7 +506,22 @@ fn malformed_scenes_give_one_clear_error() {
     let e = open_scene(root, &OpenOptions::default())
         .unwrap_err()
         .to_string();
-    assert!(e.contains("cameras.bin") && e.contains("distortion"), "{e}");
+    assert!(
+        e.contains("cameras.bin")
+            && e.contains("distortion")
+            && e.contains("open_scene_undistorted"),
+        "{e}"
+    );
+    // A fisheye camera cannot be undistorted either.
+    m.cameras[0].model = CameraModel::OpencvFisheye;
+    colmap::write_model(&root.join("sparse/0"), &m, ModelFormat::Binary).unwrap();
+    let e = open_scene_undistorted(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("cameras.bin") && e.contains("OPENCV_FISHEYE"),
+        "{e}"
+    );
     // Corrupt image.
     make_gems(root, 3, 8, 8, 6);
     std::fs::write(root.join("images/001.png"), b"garbage").unwrap();
