@@ -20,9 +20,19 @@ fn setup() -> (Image, EventStream) {
     t.sort_unstable();
     let x = (0..N).map(|_| rng.random_range(0..W as u16)).collect();
     let y = (0..N).map(|_| rng.random_range(0..H as u16)).collect();
-    let p = (0..N).map(|_| if rng.random_bool(0.5) { 1 } else { -1 }).collect();
+    let p = (0..N)
+        .map(|_| if rng.random_bool(0.5) { 1 } else { -1 })
+        .collect();
     let ev = EventStream::from_columns(W as u16, H as u16, t, x, y, p).unwrap();
-    let img = Image::new(W, H, 3, (0..W * H * 3).map(|_| rng.random_range(0.05..0.95)).collect()).unwrap();
+    let img = Image::new(
+        W,
+        H,
+        3,
+        (0..W * H * 3)
+            .map(|_| rng.random_range(0.05..0.95))
+            .collect(),
+    )
+    .unwrap();
     (img, ev)
 }
 
