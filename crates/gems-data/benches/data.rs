@@ -90,3 +90,27 @@ fn open_scene_24_views(b: divan::Bencher) {
     }
     b.bench(|| gems_data::open_scene(dir.path(), &OpenOptions::default()).unwrap());
 }
+
+/// Undistorting an 800×540 OPENCV image: building the map (once per camera) and applying it.
+#[divan::bench]
+fn undistort_build_map_800x540(b: divan::Bencher) {
+    let cam = opencv_camera();
+    b.bench(|| gems_data::undistort::UndistortMap::new(divan::black_box(&cam), 800, 540).unwrap());
+}
+
+#[divan::bench]
+fn undistort_apply_800x540(b: divan::Bencher) {
+    let map = gems_data::undistort::UndistortMap::new(&opencv_camera(), 800, 540).unwrap();
+    let img = ImageRgb::new(800, 540);
+    b.bench(|| map.apply(divan::black_box(&img)).unwrap());
+}
+
+fn opencv_camera() -> colmap::Camera {
+    colmap::Camera {
+        id: 1,
+        model: colmap::CameraModel::Opencv,
+        width: 800,
+        height: 540,
+        params: vec![700.0, 700.0, 400.0, 270.0, -0.2, 0.05, 0.001, -0.001],
+    }
+}

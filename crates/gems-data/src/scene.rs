@@ -540,20 +540,31 @@ fn undistort_views(views: &mut [View], model: &SparseModel, cams_file: &Path) ->
     Ok(())
 }
 
-/// Rows of an LLFF file, checked to be one per view.
+/// Rows of an LLFF file, one per view. E2NeRF's real scenes store `k` poses per image (from
+/// SfM on `k` EDI-deblurred frames of each exposure, `k·N` rows); the middle one of each group
+/// is the mid-exposure pose.
 fn llff_rows_for(path: &Path, n: usize) -> Result<Vec<LlffRow>> {
     let rows = llff::read_poses_bounds(path)?;
-    if rows.len() != n {
-        return Err(DataError::format(
-            path,
-            format!(
-                "{} poses but the image folder has {n} images (rows must be one per image, \
-                 sorted by name)",
-                rows.len()
-            ),
-        ));
+    if rows.len() == n {
+        return Ok(rows);
     }
-    Ok(rows)
+    if n > 0 && rows.len() > n && rows.len().is_multiple_of(n) {
+        let k = rows.len() / n;
+        tracing::info!(
+            path = %path.display(),
+            per_image = k,
+            "poses file holds {k} poses per image (E2NeRF); using the middle one of each group"
+        );
+        return Ok(rows.chunks_exact(k).map(|g| g[k / 2]).collect());
+    }
+    Err(DataError::format(
+        path,
+        format!(
+            "{} poses but the image folder has {n} images (rows must be one per image, sorted \
+             by name, or k per image as in E2NeRF)",
+            rows.len()
+        ),
+    ))
 }
 
 /// Sub-frame rows, one entry per view of `targets` (indices into the views).

@@ -361,6 +361,14 @@ fn llff_layout_interleaves_sharp_test_views() {
     );
     assert!(s.views[0].gt_subframe_poses.is_none());
     assert_eq!(s.views[1].gt_subframe_poses.as_ref().unwrap().len(), 3);
+    // E2NeRF real scenes: 5 poses per image, the middle one is the view's pose.
+    let five: Vec<LlffRow> = (0..n * 5)
+        .map(|j| LlffRow::from_pose(&pose(j), 16.0, 20.0, 30.0, 0.1, 5.0))
+        .collect();
+    llff::write_poses_bounds(&root.join("poses_bounds.npy"), &five).unwrap();
+    std::fs::remove_file(root.join("poses_bounds_subframes.npy")).unwrap();
+    let s = open_scene(root, &opts).unwrap();
+    assert!(close(s.views[4].pose.as_ref().unwrap(), &pose(4 * 5 + 2)));
     // Wrong number of poses names the file.
     llff::write_poses_bounds(&root.join("poses_bounds.npy"), &rows[..5]).unwrap();
     let e = open_scene(root, &opts).unwrap_err().to_string();
