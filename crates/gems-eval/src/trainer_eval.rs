@@ -234,7 +234,9 @@ fn load_rgb(path: &Path, k: &Intrinsics) -> Result<Vec<f32>, EvalError> {
 /// Ground truth from the scene the result was trained on (opened at the training resolution):
 /// sharp images of the training views matched by name, blurry inputs for the report, and the
 /// held-out views with a sharp ground truth, their initial pose ([`gems_data::View::pose`], the
-/// scene's pose source) mapped into the normalised frame of the result.
+/// scene's pose source, or the ground-truth pose when the scene has no other) mapped into the
+/// normalised frame of the result, and their intrinsics
+/// (the scene's, or without an SfM model the trained views' camera scaled to the image size).
 pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalData, EvalError> {
     let mut data = EvalData::default();
     for v in &output.views {
@@ -251,16 +253,42 @@ pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalD
         data.train_blurry.push(blurry);
     }
     for s in scene.views.iter().filter(|s| s.split == Split::NovelView) {
-        let (Some(gt_path), Some(pose), Some(k)) = (&s.sharp_gt, s.pose, s.intrinsics) else {
+        let Some(gt_path) = &s.sharp_gt else { continue };
+        // The scene's pose source (SfM); without one, the ground truth is the only pose there
+        // is (the result was then trained from ground-truth poses as well).
+        let Some(pose) = s.pose.or(s.gt_pose) else {
+            tracing::warn!(view = %s.name, "held-out view has no pose; not evaluated");
             continue;
         };
-        let k = Intrinsics {
-            fx: k.fx as f32,
-            fy: k.fy as f32,
-            cx: k.cx as f32,
-            cy: k.cy as f32,
-            width: k.width,
-            height: k.height,
+        // Without an SfM model the scene knows no intrinsics; the datasets use one camera, so
+        // take the trained views' camera at this image size.
+        let k = match s.intrinsics {
+            Some(k) => Intrinsics {
+                fx: k.fx as f32,
+                fy: k.fy as f32,
+                cx: k.cx as f32,
+                cy: k.cy as f32,
+                width: k.width,
+                height: k.height,
+            },
+            None => match output.views.first() {
+                Some(v) => {
+                    let (sx, sy) = (
+                        s.width as f32 / v.intrinsics.width as f32,
+                        s.height as f32 / v.intrinsics.height as f32,
+                    );
+                    let t = v.intrinsics;
+                    Intrinsics {
+                        fx: t.fx * sx,
+                        fy: t.fy * sy,
+                        cx: t.cx * sx,
+                        cy: t.cy * sy,
+                        width: s.width,
+                        height: s.height,
+                    }
+                }
+                None => continue,
+            },
         };
         let c2w = Se3::from(pose).inverse();
         let (r, t) = output.normalization.apply_c2w(&c2w.rot, &c2w.trans);

@@ -1,0 +1,125 @@
+//! Ground truth from a real scene folder (made by gems-synth): training views matched by name,
+//! held-out views with their poses, and the training resolution inferred from the result.
+
+mod common;
+
+use gems_data::Split;
+use gems_eval::*;
+use gems_math::Se3;
+use gems_train::io::{Pose, TrainOutput, ViewResult};
+use gems_train::normalize::Normalization;
+
+fn trained_on(scene: &gems_data::Scene, factor: u32, cfg_fov: f64) -> TrainOutput {
+    let views = scene
+        .views
+        .iter()
+        .filter(|v| v.split == Split::Train)
+        .map(|v| {
+            // Synthetic scenes have no SfM model yet: the camera is the generator's.
+            let (w, h) = (v.width / factor, v.height / factor);
+            let f = 0.5 * w as f64 / (0.5 * cfg_fov.to_radians()).tan();
+            let k = v.intrinsics.map_or(
+                gems_data::Intrinsics {
+                    fx: f,
+                    fy: f,
+                    cx: w as f64 / 2.0,
+                    cy: h as f64 / 2.0,
+                    width: w,
+                    height: h,
+                },
+                |k| k.resized(w, h),
+            );
+            let c2w = Se3::from(v.pose.or(v.gt_pose).unwrap()).inverse();
+            ViewResult {
+                name: v.name.clone(),
+                intrinsics: gems_train::blur::Intrinsics {
+                    fx: k.fx as f32,
+                    fy: k.fy as f32,
+                    cx: k.cx as f32,
+                    cy: k.cy as f32,
+                    width: k.width,
+                    height: k.height,
+                },
+                c2w_init: Pose::from(&c2w),
+                c2w_gt: v.gt_pose.map(|p| Pose::from(&Se3::from(p).inverse())),
+                knots: vec![[0.0; 6]; 9],
+                virtual_c2w: vec![Pose::from(&c2w); 3],
+                mid_c2w: Pose::from(&c2w),
+            }
+        })
+        .collect();
+    TrainOutput {
+        config: gems_train::TrainConfig::default(),
+        normalization: Normalization::identity(),
+        scene_scale: 1.0,
+        init_label: "gt".into(),
+        gaussians: common::scene(50, -1.5, 1.0),
+        views,
+        history: Default::default(),
+        seconds: 0.0,
+        steps: 0,
+    }
+}
+
+#[test]
+fn ground_truth_and_held_out_views_from_a_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = gems_synth::SynthConfig {
+        hold: 4,
+        ..gems_synth::SynthConfig::tiny()
+    };
+    gems_synth::generate(&cfg, dir.path()).unwrap();
+    let full = gems_data::open_scene(dir.path(), &Default::default()).unwrap();
+    let n_train = full.train_views().count();
+    let n_novel = full.nvs_eval_views().count();
+    assert!(
+        n_train >= 4 && n_novel >= 1,
+        "{n_train} train, {n_novel} novel"
+    );
+
+    for factor in [1, 2] {
+        let out = trained_on(&full, factor, cfg.fov_x_deg);
+        let scene = open_scene_for(&out, dir.path(), None).unwrap();
+        assert_eq!(scene.downscale, factor);
+        let data = eval_data_from_scene(&out, &scene).unwrap();
+        assert_eq!(data.train_gt.iter().flatten().count(), n_train);
+        assert_eq!(data.train_blurry.iter().flatten().count(), n_train);
+        assert_eq!(data.held_out.len(), n_novel);
+        let k = &out.views[0].intrinsics;
+        assert_eq!(
+            data.train_gt[0].as_ref().unwrap().len(),
+            (k.width * k.height * 3) as usize
+        );
+        for h in &data.held_out {
+            assert_eq!(h.intrinsics, *k, "same camera, same size");
+        }
+        let eval = evaluate_output(
+            &out,
+            &data,
+            &PoseRefineConfig {
+                steps: 3,
+                ..Default::default()
+            },
+            None,
+        )
+        .unwrap();
+        assert_eq!(
+            eval.metrics.deblur.as_ref().unwrap().per_image.len(),
+            n_train
+        );
+        assert_eq!(eval.metrics.nvs.as_ref().unwrap().per_image.len(), n_novel);
+        // Midpoints at the ground-truth poses: APE vanishes.
+        assert!(eval.metrics.ape.unwrap().rmse < 1e-9);
+    }
+    // A result whose views are not in the scene: one clear error.
+    let mut stranger = trained_on(&full, 1, cfg.fov_x_deg);
+    for v in &mut stranger.views {
+        v.name = format!("other_{}", v.name);
+    }
+    assert!(
+        open_scene_for(&stranger, dir.path(), None)
+            .unwrap_err()
+            .to_string()
+            .contains("no training view")
+    );
+}
