@@ -59,12 +59,20 @@ impl SplatGrad {
 /// Depth-ordered tile lists of one camera.
 #[derive(Default)]
 struct Bins {
-    /// (depth, Gaussian) of the drawable Gaussians, sorted.
-    order: Vec<(f32, u32)>,
+    /// Sort keys (depth bits, Gaussian index) of the drawable Gaussians.
+    keys: Vec<u64>,
+    /// Gaussian index of each drawable splat, by increasing depth.
+    gid: Vec<u32>,
+    /// The drawable splats in that order, so that tiles read them with increasing addresses.
+    splats: Vec<Splat>,
+    /// Tile range `[x0, x1) × [y0, y1)` of each drawable splat.
+    rects: Vec<[u16; 4]>,
     /// `[tiles + 1]` start of each tile's run in `ids`.
     offsets: Vec<u32>,
-    /// Gaussian index per intersection.
+    /// Index into `splats` per intersection.
     ids: Vec<u32>,
+    /// Copy of the splat per intersection, so that a tile reads its list sequentially.
+    packed: Vec<Splat>,
     /// Write cursor per tile while filling `ids`.
     cursor: Vec<u32>,
 }
@@ -86,13 +94,7 @@ struct TileScratch {
 
 impl TileScratch {
     /// Copies the tile's splats; `origin` is the tile's first pixel, `size` the image size.
-    fn load(
-        &mut self,
-        splats: &[Splat],
-        ids: &[u32],
-        origin: (usize, usize),
-        size: (usize, usize),
-    ) {
+    fn load(&mut self, splats: &[Splat], origin: (usize, usize), size: (usize, usize)) {
         self.x.clear();
         self.y.clear();
         self.a.clear();
@@ -102,8 +104,7 @@ impl TileScratch {
         self.col.clear();
         self.z.clear();
         self.bx.clear();
-        for &id in ids {
-            let s = &splats[id as usize];
+        for s in splats {
             self.x.push(s.x);
             self.y.push(s.y);
             self.a.push(s.conic[0]);
@@ -278,13 +279,13 @@ impl Renderer {
                 |scratch, (gt, (rgb, t, last, depth))| {
                     let (c, tile) = (gt / tiles, gt % tiles);
                     let b = &bins[c];
-                    let ids = &b.ids[b.offsets[tile] as usize..b.offsets[tile + 1] as usize];
-                    if ids.is_empty() {
+                    let range = b.offsets[tile] as usize..b.offsets[tile + 1] as usize;
+                    if range.is_empty() {
                         return;
                     }
                     let (tx, ty) = (tile % tiles_x, tile / tiles_x);
                     let origin = (tx * TILE, ty * TILE);
-                    scratch.load(&splats[c * n..(c + 1) * n], ids, origin, (w, h));
+                    scratch.load(&b.packed[range.clone()], origin, (w, h));
                     raster_tile_forward(scratch, &rules, origin, (w, h), rgb, t, last, depth);
                 },
             );
@@ -430,7 +431,7 @@ impl Renderer {
         }
         self.tile_bg_grads.clear();
         self.tile_bg_grads.resize(nc * tiles, [0.0; 3]);
-        let (bins, splats) = (&self.bins, &self.splats);
+        let bins = &self.bins;
         let (tile_t, tile_last) = (&self.tile_t, &self.tile_last);
         tile_slices
             .into_par_iter()
@@ -441,9 +442,9 @@ impl Renderer {
                 let (tx, ty) = (tile % tiles_x, tile / tiles_x);
                 let px = gt * TILE_PIXELS;
                 let b = &bins[c];
-                let ids = &b.ids[b.offsets[tile] as usize..b.offsets[tile + 1] as usize];
+                let range = b.offsets[tile] as usize..b.offsets[tile + 1] as usize;
                 let origin = (tx * TILE, ty * TILE);
-                scratch.load(&splats[c * n..(c + 1) * n], ids, origin, (w, h));
+                scratch.load(&b.packed[range.clone()], origin, (w, h));
                 let img = c * h * w;
                 let ctx = TileBackward {
                     rules: &rules,
@@ -470,7 +471,7 @@ impl Renderer {
                 let b = &bins[c];
                 let base = isect_base[c];
                 for (k, &id) in b.ids.iter().enumerate() {
-                    acc[id as usize].add(&isect_grads[base + k]);
+                    acc[b.gid[id as usize] as usize].add(&isect_grads[base + k]);
                 }
             });
 
@@ -537,7 +538,8 @@ impl Renderer {
     }
 }
 
-/// Sorts the drawable Gaussians of one camera by depth and fills its per-tile lists in that order.
+/// Sorts the drawable Gaussians of one camera by depth, stores them compactly in that order and
+/// fills the per-tile lists (indices into the compact array, hence increasing within a tile).
 fn bin_camera(
     bins: &mut Bins,
     splats: &[Splat],
@@ -547,34 +549,42 @@ fn bin_camera(
 ) {
     let tiles_x = width.div_ceil(TILE);
     let tiles_y = height.div_ceil(TILE);
-    bins.order.clear();
+    bins.keys.clear();
     for (i, (sp, r)) in splats.iter().zip(radii).enumerate() {
         // A Gaussian with opacity below the α cut-off can draw nothing; leaving it out of the
-        // lists changes no output.
+        // lists changes no output. Depth > near plane > 0, so its bit pattern sorts like the
+        // value; the index in the low bits breaks ties as the reference's stable order does.
         if r[0] > 0 && sp.opacity >= alpha_min {
-            bins.order.push((sp.depth, i as u32));
+            bins.keys
+                .push(((sp.depth.to_bits() as u64) << 32) | i as u64);
         }
     }
-    // Increasing depth, ties by index: the reference's stable order.
-    bins.order
-        .sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    bins.keys.sort_unstable();
+    bins.gid.clear();
+    bins.gid.extend(bins.keys.iter().map(|&k| k as u32));
+    bins.splats.clear();
+    bins.splats
+        .extend(bins.gid.iter().map(|&i| splats[i as usize]));
     let tiles = tiles_x * tiles_y;
     bins.offsets.clear();
     bins.offsets.resize(tiles + 1, 0);
-    let rect = |i: u32| {
-        let sp = &splats[i as usize];
+    bins.rects.clear();
+    bins.rects.extend(bins.splats.iter().map(|sp| {
         match (
             pixel_span(sp.x, sp.extent[0], width),
             pixel_span(sp.y, sp.extent[1], height),
         ) {
-            (Some((x0, x1)), Some((y0, y1))) => {
-                (x0 / TILE, x1 / TILE + 1, y0 / TILE, y1 / TILE + 1)
-            }
-            _ => (0, 0, 0, 0),
+            (Some((x0, x1)), Some((y0, y1))) => [
+                (x0 / TILE) as u16,
+                (x1 / TILE + 1) as u16,
+                (y0 / TILE) as u16,
+                (y1 / TILE + 1) as u16,
+            ],
+            _ => [0; 4],
         }
-    };
-    for &(_, i) in &bins.order {
-        let (x0, x1, y0, y1) = rect(i);
+    }));
+    for r in &bins.rects {
+        let [x0, x1, y0, y1] = r.map(usize::from);
         for ty in y0..y1 {
             for tx in x0..x1 {
                 bins.offsets[ty * tiles_x + tx + 1] += 1;
@@ -586,23 +596,50 @@ fn bin_camera(
     }
     bins.ids.clear();
     bins.ids.resize(bins.offsets[tiles] as usize, 0);
+    bins.packed.clear();
+    bins.packed
+        .resize(bins.offsets[tiles] as usize, Splat::default());
     bins.cursor.clear();
     bins.cursor.extend_from_slice(&bins.offsets[..tiles]);
     let cursor = &mut bins.cursor;
-    for &(_, i) in &bins.order {
-        let (x0, x1, y0, y1) = rect(i);
+    for (k, r) in bins.rects.iter().enumerate() {
+        let [x0, x1, y0, y1] = r.map(usize::from);
         for ty in y0..y1 {
             for tx in x0..x1 {
                 let t = ty * tiles_x + tx;
-                bins.ids[cursor[t] as usize] = i;
+                bins.ids[cursor[t] as usize] = k as u32;
+                bins.packed[cursor[t] as usize] = bins.splats[k];
                 cursor[t] += 1;
             }
         }
     }
 }
 
-/// Composites one tile front to back: splats in depth order, each over the pixels of its box
-/// that are still open, with per-pixel state in the output slices.
+/// `exp(x)` for `x ≤ 0` without a libm call, so that the per-pixel loops stay branch-free and
+/// vectorisable: `x = n·ln2 + r`, `|r| ≤ ln2/2`, degree-6 Taylor polynomial for `eʳ` (relative
+/// error below 2e-7) and `2ⁿ` from the exponent bits. Inputs below −87 give `exp(−87)`.
+#[inline(always)]
+fn exp_neg(x: f32) -> f32 {
+    const LOG2E: f32 = std::f32::consts::LOG2_E;
+    // ln 2 split so that n·LN2_HI is exact (Cody–Waite).
+    const LN2_HI: f32 = 0.693_359_4;
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    // Round to nearest without `floor` (a libm call on baseline x86-64).
+    const MAGIC: f32 = 12_582_912.0;
+    let x = x.clamp(-87.0, 0.0);
+    let n = (x * LOG2E + MAGIC) - MAGIC;
+    let r = (x - n * LN2_HI) - n * LN2_LO;
+    let p = 1.0
+        + r * (1.0
+            + r * (0.5
+                + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
+    let scale = f32::from_bits(((n as i32 + 127) as u32) << 23);
+    p * scale
+}
+
+/// Composites one tile front to back: splats in depth order, each over the pixels of its box,
+/// with per-pixel state in structure-of-arrays tile buffers. The pixel loop is branch-free
+/// (selects instead of `continue`) so that it vectorises; skipped pixels add exact zeros.
 #[allow(clippy::too_many_arguments)]
 fn raster_tile_forward(
     sc: &TileScratch,
@@ -610,10 +647,16 @@ fn raster_tile_forward(
     origin: (usize, usize),
     (w, h): (usize, usize),
     rgb: &mut [[f32; 3]],
-    t: &mut [f32],
-    last: &mut [u32],
-    depth: &mut [f32],
+    t_out: &mut [f32],
+    last_out: &mut [u32],
+    depth_out: &mut [f32],
 ) {
+    let mut t = [1.0f32; TILE_PIXELS];
+    let mut cr = [0.0f32; TILE_PIXELS];
+    let mut cg = [0.0f32; TILE_PIXELS];
+    let mut cb = [0.0f32; TILE_PIXELS];
+    let mut dz = [0.0f32; TILE_PIXELS];
+    let mut last = [0u32; TILE_PIXELS];
     // Pixels beyond the image edge are never opened.
     let mut done = [true; TILE_PIXELS];
     let mut open = 0usize;
@@ -623,49 +666,51 @@ fn raster_tile_forward(
             open += 1;
         }
     }
+    let (amin, amax, tmin) = (rules.alpha_min, rules.alpha_max, rules.t_min);
     for j in 0..sc.x.len() {
         let [x0, x1, y0, y1] = sc.bx[j].map(usize::from);
         let (mx, my) = (sc.x[j], sc.y[j]);
-        let (ca, cb, cc, op) = (sc.a[j], sc.b[j], sc.c[j], sc.o[j]);
-        let col = sc.col[j];
+        let (ca, cbb, cc, op) = (sc.a[j], sc.b[j], sc.c[j], sc.o[j]);
+        let [r, g, b] = sc.col[j];
         let z = sc.z[j];
+        let id = j as u32 + 1;
+        let px0 = mx - (origin.0 as f32 + 0.5);
+        let mut stopped = 0usize;
         for ly in y0..y1 {
             let dy = my - ((origin.1 + ly) as f32 + 0.5);
+            let row = ly * TILE;
             for lx in x0..x1 {
-                let k = ly * TILE + lx;
-                if done[k] {
-                    continue;
-                }
-                let dx = mx - ((origin.0 + lx) as f32 + 0.5);
-                let sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
-                if sigma < 0.0 {
-                    continue;
-                }
-                let alpha = (op * (-sigma).exp()).min(rules.alpha_max);
-                if alpha < rules.alpha_min {
-                    continue;
-                }
+                let k = row + lx;
+                let dx = px0 - lx as f32;
+                let sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cbb * dx * dy;
+                let alpha = (op * exp_neg(-sigma)).min(amax);
                 let tk = t[k];
                 let next_t = tk * (1.0 - alpha);
-                if next_t <= rules.t_min {
-                    done[k] = true;
-                    open -= 1;
-                    continue;
-                }
-                let wgt = alpha * tk;
-                let acc = &mut rgb[k];
-                acc[0] += col[0] * wgt;
-                acc[1] += col[1] * wgt;
-                acc[2] += col[2] * wgt;
-                depth[k] += z * wgt;
-                t[k] = next_t;
-                last[k] = j as u32 + 1;
+                let valid = !done[k] & (sigma >= 0.0) & (alpha >= amin);
+                let stop = valid & (next_t <= tmin);
+                let draw = valid & !stop;
+                done[k] |= stop;
+                stopped += stop as usize;
+                let wgt = if draw { alpha * tk } else { 0.0 };
+                cr[k] += r * wgt;
+                cg[k] += g * wgt;
+                cb[k] += b * wgt;
+                dz[k] += z * wgt;
+                t[k] = if draw { next_t } else { tk };
+                last[k] = if draw { id } else { last[k] };
             }
         }
+        open -= stopped;
         if open == 0 {
             break;
         }
     }
+    for k in 0..TILE_PIXELS {
+        rgb[k] = [cr[k], cg[k], cb[k]];
+    }
+    t_out.copy_from_slice(&t);
+    last_out.copy_from_slice(&last);
+    depth_out.copy_from_slice(&dz);
 }
 
 /// Inputs of one tile's backward.
@@ -721,28 +766,27 @@ fn raster_tile_backward(
             max_last = max_last.max(ctx.last[k]);
         }
     }
+    let (amin, amax) = (rules.alpha_min, rules.alpha_max);
     for j in (0..max_last as usize).rev() {
         let [x0, x1, y0, y1] = sc.bx[j].map(usize::from);
         let (mx, my) = (sc.x[j], sc.y[j]);
         let (ca, cb, cc, op) = (sc.a[j], sc.b[j], sc.c[j], sc.o[j]);
         let col = sc.col[j];
+        let px0 = mx - (ox as f32 + 0.5);
         let mut gr = SplatGrad::default();
         for ly in y0..y1 {
             let dy = my - ((oy + ly) as f32 + 0.5);
+            let row = ly * TILE;
             for lx in x0..x1 {
-                let k = ly * TILE + lx;
-                if j as u32 >= ctx.last[k] {
-                    continue;
-                }
-                let dx = mx - ((ox + lx) as f32 + 0.5);
+                let k = row + lx;
+                let dx = px0 - lx as f32;
                 let sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
-                if sigma < 0.0 {
-                    continue;
-                }
-                let gauss = (-sigma).exp();
+                let gauss = exp_neg(-sigma);
                 let raw = op * gauss;
-                let alpha = raw.min(rules.alpha_max);
-                if alpha < rules.alpha_min {
+                let alpha = raw.min(amax);
+                // Exactly the forward's test for "composited at this pixel".
+                let valid = ((j as u32) < ctx.last[k]) & (sigma >= 0.0) & (alpha >= amin);
+                if !valid {
                     continue;
                 }
                 let ra = 1.0 / (1.0 - alpha);
@@ -757,7 +801,7 @@ fn raster_tile_backward(
                     v_alpha += v[ch] * (col[ch] * tk - bh[ch] * ra);
                     bh[ch] += col[ch] * wgt;
                 }
-                if raw <= rules.alpha_max {
+                if raw <= amax {
                     let v_sigma = -raw * v_alpha;
                     gr.conic[0] += 0.5 * v_sigma * dx * dx;
                     gr.conic[1] += v_sigma * dx * dy;
@@ -771,4 +815,32 @@ fn raster_tile_backward(
         grads[j] = gr;
     }
     v_bg
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exp_neg_is_accurate_where_alpha_can_pass_the_cutoff() {
+        let mut worst = 0.0f64;
+        for k in 0..=200_000 {
+            let x = -(k as f32) * 30.0 / 200_000.0;
+            let got = exp_neg(x) as f64;
+            let want = (x as f64).exp();
+            worst = worst.max((got - want).abs() / want);
+        }
+        assert!(worst < 3e-7, "relative error {worst}");
+        assert_eq!(exp_neg(0.0), 1.0);
+        assert!(exp_neg(-200.0) > 0.0 && exp_neg(-200.0) < 1e-37);
+    }
+
+    #[test]
+    fn pixel_span_covers_exactly_the_centres_within_the_extent() {
+        // Centres at x + 0.5: mean 10.2, extent 2 covers centres 8.5..=11.5 → pixels 8..=11.
+        assert_eq!(pixel_span(10.2, 2.0, 100), Some((8, 11)));
+        assert_eq!(pixel_span(-5.0, 2.0, 100), None);
+        assert_eq!(pixel_span(1.0, 100.0, 10), Some((0, 9)));
+        assert_eq!(pixel_span(f32::NAN, 1.0, 10), None);
+    }
 }
