@@ -36,7 +36,7 @@ mod scene;
 mod search;
 
 pub use core::{Image, PixelEvents, binned_factors, exact_factors, on_off_from_signed};
-pub use scene::{EdiOutput, EdiScene, EdiView, deblur_scene, write_edi_scene};
+pub use scene::{EdiScene, EdiView, deblur_scene, write_edi_scene};
 pub use search::{SearchConfig, estimate_thresholds, event_edges, minimise, sharpness_energy};
 
 /// Errors of the EDI stage.

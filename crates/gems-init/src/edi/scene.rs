@@ -37,9 +37,6 @@ pub struct EdiScene {
     pub mode: EdiMode,
 }
 
-/// Short alias used by callers that only pass the result through.
-pub type EdiOutput = EdiScene;
-
 fn to_image(img: &ImageRgb) -> Image {
     Image {
         width: img.width as usize,
