@@ -84,8 +84,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             per_view: args.per_view,
             ..SearchConfig::default()
         }),
-        reference: if args.at_start { Reference::Start } else { Reference::Mid },
-        mode: args.bins.map_or(EdiMode::Exact, |bins| EdiMode::Binned { bins }),
+        reference: if args.at_start {
+            Reference::Start
+        } else {
+            Reference::Mid
+        },
+        mode: args
+            .bins
+            .map_or(EdiMode::Exact, |bins| EdiMode::Binned { bins }),
         linearisation,
         upper_clamp: args.upper_clamp,
         bayer: None,

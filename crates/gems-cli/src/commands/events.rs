@@ -63,8 +63,13 @@ pub struct ConvertArgs {
 }
 
 fn parse_size(s: &str) -> Result<(u16, u16), String> {
-    let (w, h) = s.split_once('x').ok_or("expected WIDTHxHEIGHT, e.g. 346x260")?;
-    Ok((w.parse().map_err(|e| format!("width: {e}"))?, h.parse().map_err(|e| format!("height: {e}"))?))
+    let (w, h) = s
+        .split_once('x')
+        .ok_or("expected WIDTHxHEIGHT, e.g. 346x260")?;
+    Ok((
+        w.parse().map_err(|e| format!("width: {e}"))?,
+        h.parse().map_err(|e| format!("height: {e}"))?,
+    ))
 }
 
 fn write(path: &std::path::Path, events: &gems_events::EventStream) -> anyhow::Result<()> {
@@ -88,14 +93,21 @@ pub fn run(cmd: EventsCommand) -> anyhow::Result<()> {
                 log_eps: a.log_eps,
                 seed: a.seed,
             };
-            let encoding = if a.linear { FrameEncoding::Linear } else { FrameEncoding::Srgb };
+            let encoding = if a.linear {
+                FrameEncoding::Linear
+            } else {
+                FrameEncoding::Srgb
+            };
             let events = gems_events::simulate_folder(&a.frames, &config, encoding)
                 .with_context(|| format!("simulating events from {}", a.frames.display()))?;
             write(&a.output, &events)?;
             tracing::info!(events = events.len(), output = %a.output.display(), "wrote simulated events");
         }
         EventsCommand::Convert(a) => {
-            let opts = ReadOptions { size: a.size, ..ReadOptions::default() };
+            let opts = ReadOptions {
+                size: a.size,
+                ..ReadOptions::default()
+            };
             let events = gems_events::read_events(&a.input, &opts)?;
             write(&a.output, &events)?;
             tracing::info!(events = events.len(), output = %a.output.display(), "converted");
