@@ -152,6 +152,18 @@ pub fn evaluate_views(
     mode: PoseMode,
     lpips: Option<&Lpips>,
 ) -> Result<SplitResult, EvalError> {
+    evaluate_views_with_progress(renderer, gaussians, views, mode, lpips, &mut |_| {})
+}
+
+/// [`evaluate_views`], calling `on_view` with each view's name after it is scored.
+pub fn evaluate_views_with_progress(
+    renderer: &mut Renderer,
+    gaussians: &Gaussians,
+    views: &[EvalView],
+    mode: PoseMode,
+    lpips: Option<&Lpips>,
+    on_view: &mut dyn FnMut(&str),
+) -> Result<SplitResult, EvalError> {
     let mut per_image = Vec::with_capacity(views.len());
     let mut renders = Vec::with_capacity(views.len());
     let mut poses = Vec::with_capacity(views.len());
@@ -181,6 +193,7 @@ pub fn evaluate_views(
         per_image.push(score_image(&v.name, &rgb, &v.gt, h, w, lpips)?);
         renders.push(rgb);
         poses.push(pose);
+        on_view(&v.name);
     }
     Ok(SplitResult {
         scores: SplitScores::from_images(per_image),

@@ -36,13 +36,14 @@ use std::path::{Path, PathBuf};
 
 pub use evaluate::{
     ApeSummary, EvalView, ImageScore, MetricsReport, PoseMode, SplitResult, SplitScores,
-    ape_of_centres, evaluate_views, score_image,
+    ape_of_centres, evaluate_views, evaluate_views_with_progress, score_image,
 };
 pub use refine::{PoseRefineConfig, Refined, refine_pose};
 pub use report::{GridRow, ReportInput, write_report};
 pub use trainer_eval::{
-    EvalData, Evaluation, HeldOutView, eval_data_from_scene, evaluate_output, open_scene_for,
-    report_input, write_trajectories,
+    EvalData, Evaluation, HeldOutView, eval_data_from_scene, evaluate_output,
+    evaluate_output_with_progress, evaluation_units, open_scene_for, report_input,
+    write_trajectories,
 };
 
 /// Errors of evaluation and export. Every file error names the file.

@@ -12,7 +12,7 @@ use gems_train::io::TrainOutput;
 
 use crate::EvalError;
 use crate::evaluate::{
-    EvalView, MetricsReport, PoseMode, SplitResult, ape_of_centres, evaluate_views,
+    EvalView, MetricsReport, PoseMode, SplitResult, ape_of_centres, evaluate_views_with_progress,
 };
 use crate::refine::PoseRefineConfig;
 use crate::report::{GridRow, ReportInput};
@@ -63,6 +63,24 @@ pub fn evaluate_output(
     refine: &PoseRefineConfig,
     lpips: Option<&Lpips>,
 ) -> Result<Evaluation, EvalError> {
+    evaluate_output_with_progress(output, data, refine, lpips, &mut |_| {})
+}
+
+/// Renders [`evaluate_output`] does: one per deblur view plus two per held-out view; pass it to
+/// a progress bar driven by [`evaluate_output_with_progress`].
+pub fn evaluation_units(data: &EvalData) -> usize {
+    data.train_gt.iter().flatten().count() + 2 * data.held_out.len()
+}
+
+/// [`evaluate_output`], calling `on_view` with the view name after each of the
+/// [`evaluation_units`] evaluations (the refined ones are the slow ones).
+pub fn evaluate_output_with_progress(
+    output: &TrainOutput,
+    data: &EvalData,
+    refine: &PoseRefineConfig,
+    lpips: Option<&Lpips>,
+    on_view: &mut dyn FnMut(&str),
+) -> Result<Evaluation, EvalError> {
     if !data.train_gt.is_empty() && data.train_gt.len() != output.views.len() {
         return Err(EvalError::Input(format!(
             "{} training ground-truth entries for {} training views",
@@ -97,22 +115,12 @@ pub fn evaluate_output(
             gt: h.gt.clone(),
         })
         .collect();
-    let deblur = evaluate_views(
-        &mut renderer,
-        gaussians,
-        &train_views,
-        PoseMode::AsGiven,
-        lpips,
-    )?;
-    let nvs_no_pose_opt =
-        evaluate_views(&mut renderer, gaussians, &held, PoseMode::AsGiven, lpips)?;
-    let nvs = evaluate_views(
-        &mut renderer,
-        gaussians,
-        &held,
-        PoseMode::Refine(*refine),
-        lpips,
-    )?;
+    let mut run = |views: &[EvalView], mode| {
+        evaluate_views_with_progress(&mut renderer, gaussians, views, mode, lpips, on_view)
+    };
+    let deblur = run(&train_views, PoseMode::AsGiven)?;
+    let nvs_no_pose_opt = run(&held, PoseMode::AsGiven)?;
+    let nvs = run(&held, PoseMode::Refine(*refine))?;
     let (est, gt) = midpoint_and_gt_centres(output);
     let ape = if est.len() < 3 {
         None

@@ -67,7 +67,17 @@ fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
 #[test]
 fn protocol_and_outputs() {
     let (out, data) = output(0.004);
-    let eval = evaluate_output(&out, &data, &PoseRefineConfig::default(), None).unwrap();
+    let mut seen = Vec::new();
+    let eval =
+        evaluate_output_with_progress(&out, &data, &PoseRefineConfig::default(), None, &mut |n| {
+            seen.push(n.to_string())
+        })
+        .unwrap();
+    assert_eq!(seen.len(), evaluation_units(&data));
+    assert_eq!(
+        (seen[0].as_str(), seen[5].as_str(), seen[8].as_str()),
+        ("images/0000.png", "novel0", "novel1")
+    );
     let m = &eval.metrics;
     let deblur = m.deblur.as_ref().unwrap();
     assert_eq!(deblur.per_image.len(), 5);
