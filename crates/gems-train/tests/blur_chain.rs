@@ -51,12 +51,10 @@ fn knot_gradients_match_finite_differences_of_the_blurred_loss() {
             / times.len() as f64
     };
     let h = 1e-3;
-    let mut max_abs = 0.0f64;
-    for j in 0..4 {
-        for c in 0..6 {
-            max_abs = max_abs.max(analytic[j][c].abs());
-        }
-    }
+    let max_abs = analytic
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, v| m.max(v.abs()));
     assert!(
         max_abs > 1e-2,
         "test scene gives a meaningful pose gradient ({max_abs})"
