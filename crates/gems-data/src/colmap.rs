@@ -103,6 +103,15 @@ impl Camera {
     /// which gems does not do, so this returns an explanatory error message.
     pub fn intrinsics(&self) -> std::result::Result<Intrinsics, String> {
         let p = &self.params;
+        if p.len() != self.model.num_params() {
+            return Err(format!(
+                "camera {} ({}) has {} parameters, the model needs {}",
+                self.id,
+                self.model.name(),
+                p.len(),
+                self.model.num_params()
+            ));
+        }
         let (fx, fy, cx, cy, dist): (f64, f64, f64, f64, &[f64]) = match self.model {
             CameraModel::SimplePinhole => (p[0], p[0], p[1], p[2], &[]),
             CameraModel::Pinhole => (p[0], p[1], p[2], p[3], &[]),
@@ -355,6 +364,7 @@ fn validate(m: &SparseModel, cams_p: &Path, imgs_p: &Path, pts_p: &Path) -> Resu
             ));
         }
         for &(iid, idx) in &p.track {
+            // Models saved without keypoints (empty POINTS2D) cannot be cross-checked.
             match img_ids.binary_search_by_key(&iid, |e| e.0) {
                 Ok(k) if (idx as usize) < img_ids[k].1 || img_ids[k].1 == 0 => {}
                 Ok(_) => {

@@ -118,6 +118,14 @@ impl LlffRow {
                 "{what} contains NaN or infinite values"
             )));
         }
+        if !(self.height() >= 1.0 && self.width() >= 1.0 && self.focal() > 0.0) {
+            return Err(FormatError::new(format!(
+                "{what} has invalid [height, width, focal] = [{}, {}, {}]",
+                self.height(),
+                self.width(),
+                self.focal()
+            )));
+        }
         let m = &self.matrix;
         let r = [
             [m[0][0], m[0][1], m[0][2]],

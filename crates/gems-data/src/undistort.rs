@@ -19,13 +19,16 @@ use crate::pose::Intrinsics;
 /// - OPENCV `k1, k2, p1, p2`: radial as RADIAL plus tangential
 ///   `(2 p1 x y + p2 (r² + 2x²), p1 (r² + 2y²) + 2 p2 x y)`
 ///
-/// Returns `None` for models without these equations.
+/// Returns `None` for models without these equations or a parameter list of the wrong length.
 pub fn distort_normalized(
     model: CameraModel,
     params: &[f64],
     x: f64,
     y: f64,
 ) -> Option<(f64, f64)> {
+    if params.len() != model.num_params() {
+        return None;
+    }
     let r2 = x * x + y * y;
     let (radial, p1, p2) = match model {
         CameraModel::SimplePinhole | CameraModel::Pinhole => (0.0, 0.0, 0.0),
@@ -43,6 +46,9 @@ pub fn distort_normalized(
 /// Pinhole part `(fx, fy, cx, cy)` of a camera's parameters.
 fn pinhole_params(cam: &Camera) -> Option<[f64; 4]> {
     let p = &cam.params;
+    if p.len() != cam.model.num_params() {
+        return None;
+    }
     match cam.model {
         CameraModel::SimplePinhole | CameraModel::SimpleRadial | CameraModel::Radial => {
             Some([p[0], p[0], p[1], p[2]])
@@ -69,10 +75,11 @@ impl UndistortMap {
     pub fn new(cam: &Camera, width: u32, height: u32) -> Result<UndistortMap, String> {
         let [fx, fy, cx, cy] = pinhole_params(cam).ok_or_else(|| {
             format!(
-                "camera {}: cannot undistort model {} (supported: SIMPLE_PINHOLE, PINHOLE, \
-                 SIMPLE_RADIAL, RADIAL, OPENCV)",
+                "camera {}: cannot undistort model {} with {} parameters (supported: \
+                 SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV)",
                 cam.id,
-                cam.model.name()
+                cam.model.name(),
+                cam.params.len()
             )
         })?;
         if cam.width == 0 || cam.height == 0 {

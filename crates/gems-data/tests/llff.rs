@@ -134,6 +134,15 @@ fn malformed_poses_files_name_the_file() {
     write_poses_bounds(&path, &r).unwrap();
     let e = read_poses_bounds(&path).unwrap_err().to_string();
     assert!(e.contains("rotation"), "{e}");
+    // Zero image width.
+    let mut r = rows(2);
+    r[1].matrix[1][4] = 0.0;
+    write_poses_bounds(&path, &r).unwrap();
+    let e = read_poses_bounds(&path).unwrap_err().to_string();
+    assert!(
+        e.contains("row 1") && e.contains("[height, width, focal]"),
+        "{e}"
+    );
     // Wrong shape: a sub-frame file read as poses_bounds, and vice versa.
     write_subframes(&path, &[rows(2)]).unwrap();
     let e = read_poses_bounds(&path).unwrap_err().to_string();
