@@ -5,9 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use gems_eval::{
-    PoseRefineConfig, evaluate_output, write_metrics_json, write_report, write_trajectories,
-};
+use gems_eval::{PoseRefineConfig, write_metrics_json, write_report, write_trajectories};
 
 /// Arguments of `gems eval`.
 #[derive(clap::Args)]
@@ -61,7 +59,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         held_out = data.held_out.len(),
         "evaluating"
     );
-    let eval = evaluate_output(&output, &data, &refine, lpips.as_ref())?;
+    let bar = indicatif::ProgressBar::new(gems_eval::evaluation_units(&data) as u64);
+    bar.set_style(indicatif::ProgressStyle::with_template(
+        "eval [{bar:30}] {pos}/{len} views  {msg}  ({elapsed}, ETA {eta})",
+    )?);
+    let eval = gems_eval::evaluate_output_with_progress(
+        &output,
+        &data,
+        &refine,
+        lpips.as_ref(),
+        &mut |name| {
+            bar.set_message(name.to_string());
+            bar.inc(1);
+        },
+    )?;
+    bar.finish_and_clear();
     write_metrics_json(&args.output.join("metrics.json"), &eval.metrics)?;
     write_trajectories(&args.output, &output)?;
     let report = write_report(
