@@ -13,6 +13,18 @@
 //!   trained result that gems-eval consumes.
 //! * [`prepare`] — scene folder + init mode (colmap / gt / gt-noisy) → [`trainer::TrainInput`].
 //! * [`init`] — Gaussians from SfM points (3-NN scales) or random points in the camera frustums.
+//!
+//! Typical use (what `gems train` does):
+//! ```ignore
+//! let input = prepare::prepare_input(&scene, &prepare::InitMode::Gt, &cfg)?;
+//! let mut trainer = trainer::Trainer::new(cfg, input)?;
+//! trainer.run(|t, report| { /* progress; io::save_checkpoint(dir, t) periodically */ Ok(()) })?;
+//! let output = io::TrainOutput::from_trainer(&trainer);
+//! output.save(dir)?; // model.safetensors + model.json, read back with TrainOutput::load
+//! let ply_gaussians = output.normalization.gaussians_to_input_frame(&output.gaussians);
+//! ```
+//! Resume: `io::load_checkpoint(dir)` → `Trainer::from_state(cfg, views, …, state)` continues
+//! bit-identically (same seed → same result; results do not depend on the thread count).
 pub mod adam;
 pub mod blur;
 pub mod config;
