@@ -46,14 +46,15 @@ impl ImageRgb {
         self.data.len() * std::mem::size_of::<f32>()
     }
 
-    fn to_rgb8(&self) -> image::RgbImage {
+    /// 8-bit copy, or `None` when `data` does not have `width * height * 3` values.
+    fn to_rgb8(&self) -> Option<image::RgbImage> {
         let bytes = self
             .data
             .iter()
             .map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
             .collect();
         image::RgbImage::from_raw(self.width, self.height, bytes)
-            .expect("ImageRgb invariant: data.len() == width * height * 3")
+            .filter(|img| img.as_raw().len() == self.data.len())
     }
 }
 
@@ -96,7 +97,17 @@ pub fn save_png(path: &Path, img: &ImageRgb) -> Result<()> {
 
 /// Writes an 8-bit image in `format` atomically (JPEG at quality 95).
 fn save_image(path: &Path, img: &ImageRgb, format: image::ImageFormat) -> Result<()> {
-    let rgb = img.to_rgb8();
+    let rgb = img.to_rgb8().ok_or_else(|| {
+        DataError::format(
+            path,
+            format!(
+                "cannot write: image buffer holds {} values, {}x{}x3 expected",
+                img.data.len(),
+                img.width,
+                img.height
+            ),
+        )
+    })?;
     let mut buf = std::io::Cursor::new(Vec::new());
     match format {
         image::ImageFormat::Jpeg => {
@@ -354,6 +365,16 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("missing.png"), "{e}");
+        let broken = ImageRgb {
+            width: 4,
+            height: 4,
+            data: vec![0.0; 5],
+        };
+        let e = save_png(&dir.path().join("broken.png"), &broken)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("broken.png") && e.contains("5 values"), "{e}");
+        assert!(!dir.path().join("broken.png").exists());
         std::fs::write(dir.path().join("bad.png"), b"\x89PNG\r\n\x1a\nnope").unwrap();
         let e = load_image(&dir.path().join("bad.png"))
             .unwrap_err()
