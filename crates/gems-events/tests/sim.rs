@@ -219,3 +219,32 @@ fn bad_input_is_an_error_not_a_panic() {
         4 * ((0.9f32 + 1e-3).ln() - (0.5f32 + 1e-3).ln()).div_euclid(0.2) as usize
     );
 }
+
+mod prop {
+    use gems_events::{SimConfig, Simulator};
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+        /// For any luminance sequence, Σ polarity·C equals the log change up to one threshold, and
+        /// events are time-sorted inside the fed interval.
+        #[test]
+        fn polarity_sum_tracks_log_change(
+            seq in proptest::collection::vec(0.0f32..1.0, 2..20),
+            cp in 0.05f32..0.6,
+            cn in 0.05f32..0.6,
+        ) {
+            let cfg = SimConfig { c_pos: cp, c_neg: cn, ..SimConfig::default() };
+            let mut sim = Simulator::new(cfg.clone(), 1, 1).unwrap();
+            for (k, &v) in seq.iter().enumerate() {
+                sim.feed_luma(&[v], 100 * k as i64).unwrap();
+            }
+            let ev = sim.finish();
+            let sum: f32 = ev.p().iter().map(|&p| if p > 0 { cp } else { -cn }).sum();
+            let dlog = (seq[seq.len() - 1] + cfg.log_eps).ln() - (seq[0] + cfg.log_eps).ln();
+            prop_assert!((dlog - sum).abs() < cp.max(cn) + 1e-3, "Δlog {} vs Σ {}", dlog, sum);
+            prop_assert!(ev.t().is_sorted());
+            prop_assert!(ev.t().iter().all(|&t| t >= 0 && t <= 100 * (seq.len() as i64 - 1)));
+        }
+    }
+}
