@@ -1,8 +1,10 @@
 //! `gems render`: render a Gaussian-splat PLY to PNG from a camera given on the command line.
 //!
-//! The pose is either a position and a look-at target (`--cam-pos`, `--look-at`, optional
-//! `--up`) or an explicit OpenCV world-to-camera rotation and translation (`--rotation`,
-//! `--translation`). Reading cameras from COLMAP/LLFF files waits for the data layer's readers.
+//! The camera is one image of a COLMAP model (`--colmap <sparse dir> --image <name>`: its
+//! intrinsics and pose), or given on the command line: intrinsics from `--width/--height` and
+//! `--fx/--fy/--cx/--cy` or `--fov`, pose as a position and a look-at target (`--cam-pos`,
+//! `--look-at`, optional `--up`) or an explicit OpenCV world-to-camera rotation and translation
+//! (`--rotation`, `--translation`).
 
 use std::path::PathBuf;
 
@@ -53,6 +55,12 @@ pub struct Args {
     /// World-to-camera translation: x,y,z (x_cam = R x_world + t).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub translation: Option<[f32; 3]>,
+    /// COLMAP sparse model folder (cameras/images .bin or .txt) to take the camera from.
+    #[arg(long, requires = "image")]
+    pub colmap: Option<PathBuf>,
+    /// Image name in the COLMAP model whose camera to render.
+    #[arg(long, requires = "colmap")]
+    pub image: Option<String>,
     /// Background colour r,g,b in [0, 1].
     #[arg(long, value_parser = parse_vec3, default_value = "0,0,0")]
     pub background: [f32; 3],
@@ -82,8 +90,49 @@ fn parse_mat3(s: &str) -> Result<[[f32; 3]; 3], String> {
     Ok([[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]])
 }
 
+/// The camera of image `name` in the COLMAP model at `dir`.
+fn colmap_camera(dir: &std::path::Path, name: &str) -> anyhow::Result<Camera> {
+    let model = gems_data::colmap::read_model(dir)
+        .with_context(|| format!("reading the COLMAP model in {}", dir.display()))?;
+    let image = model.image_by_name(name).with_context(|| {
+        format!(
+            "no image named `{name}` in the COLMAP model {}",
+            dir.display()
+        )
+    })?;
+    let cam = model
+        .camera(image.camera_id)
+        .with_context(|| format!("camera {} of image `{name}` is missing", image.camera_id))?;
+    let k = cam.intrinsics().map_err(anyhow::Error::msg)?;
+    let pose = image.pose();
+    Ok(Camera {
+        fx: k.fx as f32,
+        fy: k.fy as f32,
+        cx: k.cx as f32,
+        cy: k.cy as f32,
+        width: k.width,
+        height: k.height,
+        rotation: pose.rotation.map(|r| r.map(|v| v as f32)),
+        translation: pose.translation.map(|v| v as f32),
+    })
+}
+
 /// Builds the camera from the arguments, rejecting contradictory or incomplete poses.
 pub fn camera(args: &Args) -> anyhow::Result<Camera> {
+    if let (Some(dir), Some(name)) = (&args.colmap, &args.image) {
+        let given = [
+            args.cam_pos.is_some(),
+            args.look_at.is_some(),
+            args.rotation.is_some(),
+            args.translation.is_some(),
+        ];
+        if given.iter().any(|&g| g) {
+            bail!(
+                "--colmap/--image already give the pose; drop --cam-pos/--look-at/--rotation/--translation"
+            );
+        }
+        return colmap_camera(dir, name);
+    }
     if args.width == 0 || args.height == 0 {
         bail!("--width and --height must be positive");
     }
