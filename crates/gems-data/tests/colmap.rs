@@ -333,3 +333,84 @@ proptest! {
         }
     }
 }
+
+fn arb_camera() -> impl Strategy<Value = Camera> {
+    (any::<u32>(), 0i32..11, 1u64..10_000, 1u64..10_000).prop_flat_map(|(id, m, w, h)| {
+        let model = CameraModel::from_id(m).unwrap();
+        proptest::collection::vec(-1e6f64..1e6, model.num_params()).prop_map(move |params| Camera {
+            id,
+            model,
+            width: w,
+            height: h,
+            params,
+        })
+    })
+}
+
+fn arb_image() -> impl Strategy<Value = Image> {
+    (
+        any::<u32>(),
+        proptest::array::uniform4(-1.0f64..1.0),
+        proptest::array::uniform3(-1e3f64..1e3),
+        any::<u32>(),
+        "[a-zA-Z0-9_][a-zA-Z0-9_ ./-]{0,20}[a-zA-Z0-9_]",
+        proptest::collection::vec(
+            (
+                -1e4f64..1e4,
+                -1e4f64..1e4,
+                prop_oneof![Just(INVALID_POINT3D_ID), 0u64..1_000_000],
+            ),
+            0..6,
+        ),
+    )
+        .prop_map(|(id, qvec, tvec, camera_id, name, pts)| Image {
+            id,
+            qvec,
+            tvec,
+            camera_id,
+            name,
+            points2d: pts
+                .into_iter()
+                .map(|(x, y, point3d_id)| Point2D { x, y, point3d_id })
+                .collect(),
+        })
+}
+
+fn arb_point() -> impl Strategy<Value = Point3D> {
+    (
+        any::<u64>(),
+        proptest::array::uniform3(-1e6f64..1e6),
+        proptest::array::uniform3(any::<u8>()),
+        -1.0f64..10.0,
+        proptest::collection::vec((any::<u32>(), any::<u32>()), 0..5),
+    )
+        .prop_map(|(id, xyz, rgb, error, track)| Point3D {
+            id,
+            xyz,
+            rgb,
+            error,
+            track,
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(128))]
+    /// Any model survives binary serialisation exactly and text serialisation exactly (shortest
+    /// round-trip float formatting), and the text form parses back to the binary form's model.
+    #[test]
+    fn arbitrary_models_round_trip(
+        cameras in proptest::collection::vec(arb_camera(), 0..4),
+        images in proptest::collection::vec(arb_image(), 0..4),
+        points in proptest::collection::vec(arb_point(), 0..4),
+    ) {
+        let cb = cameras_to_bin(&cameras);
+        prop_assert_eq!(&parse_cameras_bin(&cb).unwrap(), &cameras);
+        let ib = images_to_bin(&images);
+        prop_assert_eq!(&parse_images_bin(&ib).unwrap(), &images);
+        let pb = points3d_to_bin(&points);
+        prop_assert_eq!(&parse_points3d_bin(&pb).unwrap(), &points);
+        prop_assert_eq!(&parse_cameras_txt(&cameras_to_txt(&cameras)).unwrap(), &cameras);
+        prop_assert_eq!(&parse_images_txt(&images_to_txt(&images)).unwrap(), &images);
+        prop_assert_eq!(&parse_points3d_txt(&points3d_to_txt(&points)).unwrap(), &points);
+    }
+}
