@@ -39,7 +39,10 @@ fn rmse_fraction(est: &[[f64; 3]], gt: &[[f64; 3]], gt_all: &[[f64; 3]]) -> Opti
 }
 
 fn load_images(dir: &Path) -> Vec<SfmImage> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
     files.sort();
     files
         .iter()
@@ -67,7 +70,9 @@ fn main() {
             s => seeds.push(s.parse::<u64>().unwrap()),
         }
     }
-    println!("| seed | level | blur px | method | registered | points | trans. RMSE / path extent | seconds |");
+    println!(
+        "| seed | level | blur px | method | registered | points | trans. RMSE / path extent | seconds |"
+    );
     println!("|---|---|---|---|---|---|---|---|");
     for seed in seeds {
         cfg.seed = seed;
@@ -77,7 +82,12 @@ fn main() {
             let sums = gems_synth::generate_blur_levels(&cfg, &dir, &mut |_, _| {}).unwrap();
             let means: Vec<String> = sums
                 .iter()
-                .map(|s| format!("{}", s.blur_px.iter().sum::<f64>() / s.blur_px.len().max(1) as f64))
+                .map(|s| {
+                    format!(
+                        "{}",
+                        s.blur_px.iter().sum::<f64>() / s.blur_px.len().max(1) as f64
+                    )
+                })
                 .collect();
             std::fs::write(&blur_file, means.join("\n")).unwrap();
         }
@@ -90,55 +100,79 @@ fn main() {
             let images = load_images(&ld.join("images"));
             let gt: Vec<[f64; 3]> = rows.iter().map(|r| r.pose().center()).collect();
             let blur = blurs.get(li).copied().unwrap_or(f64::NAN);
-            // gems sfm
-            let t = std::time::Instant::now();
-            let ours = match run_sfm(&images, &SfmOptions::default()) {
-                Ok(r) => {
-                    let (est, g): (Vec<[f64; 3]>, Vec<[f64; 3]>) = r
-                        .views
-                        .iter()
-                        .zip(&gt)
-                        .filter_map(|(v, g)| v.pose.map(|p| -> ([f64; 3], [f64; 3]) { (p.centre().into(), *g) }))
-                        .unzip();
-                    Outcome {
-                        registered: r.stats.registered,
-                        points: r.stats.points,
-                        rmse_frac: rmse_fraction(&est, &g, &gt),
-                        seconds: t.elapsed().as_secs_f64(),
-                    }
-                }
-                Err(e) => {
-                    eprintln!("gems sfm failed on {}: {e}", ld.display());
-                    Outcome { registered: 0, points: 0, rmse_frac: None, seconds: t.elapsed().as_secs_f64() }
-                }
-            };
-            let mut results = vec![("gems sfm", ours)];
-            if colmap {
+            // gems sfm, focal estimated and focal from the scene metadata (hwf of poses_bounds).
+            let mut results = Vec::new();
+            for (label, focal) in [
+                ("gems sfm (focal estimated)", None),
+                ("gems sfm (focal from metadata)", Some(rows[0].focal())),
+            ] {
                 let t = std::time::Instant::now();
-                let cw = ld.join("colmap_run");
-                let _ = std::fs::remove_dir_all(&cw);
-                let out = match run_colmap_cli(&ld.join("images"), &cw, &ColmapCliOptions::default()) {
-                    Ok((m, _)) => {
-                        let (est, g): (Vec<[f64; 3]>, Vec<[f64; 3]>) = m
-                            .images
+                let opts = SfmOptions {
+                    focal_px: focal,
+                    ..SfmOptions::default()
+                };
+                let ours = match run_sfm(&images, &opts) {
+                    Ok(r) => {
+                        let (est, g): (Vec<[f64; 3]>, Vec<[f64; 3]>) = r
+                            .views
                             .iter()
-                            .filter_map(|im| {
-                                let k = images.iter().position(|x| x.name == im.name)?;
-                                Some((im.pose().center(), gt[k]))
+                            .zip(&gt)
+                            .filter_map(|(v, g)| {
+                                v.pose
+                                    .map(|p| -> ([f64; 3], [f64; 3]) { (p.centre().into(), *g) })
                             })
                             .unzip();
                         Outcome {
-                            registered: m.images.len(),
-                            points: m.points.len(),
+                            registered: r.stats.registered,
+                            points: r.stats.points,
                             rmse_frac: rmse_fraction(&est, &g, &gt),
                             seconds: t.elapsed().as_secs_f64(),
                         }
                     }
                     Err(e) => {
-                        eprintln!("colmap failed on {}: {e}", ld.display());
-                        Outcome { registered: 0, points: 0, rmse_frac: None, seconds: t.elapsed().as_secs_f64() }
+                        eprintln!("gems sfm failed on {}: {e}", ld.display());
+                        Outcome {
+                            registered: 0,
+                            points: 0,
+                            rmse_frac: None,
+                            seconds: t.elapsed().as_secs_f64(),
+                        }
                     }
                 };
+                results.push((label, ours));
+            }
+            if colmap {
+                let t = std::time::Instant::now();
+                let cw = ld.join("colmap_run");
+                let _ = std::fs::remove_dir_all(&cw);
+                let out =
+                    match run_colmap_cli(&ld.join("images"), &cw, &ColmapCliOptions::default()) {
+                        Ok((m, _)) => {
+                            let (est, g): (Vec<[f64; 3]>, Vec<[f64; 3]>) = m
+                                .images
+                                .iter()
+                                .filter_map(|im| {
+                                    let k = images.iter().position(|x| x.name == im.name)?;
+                                    Some((im.pose().center(), gt[k]))
+                                })
+                                .unzip();
+                            Outcome {
+                                registered: m.images.len(),
+                                points: m.points.len(),
+                                rmse_frac: rmse_fraction(&est, &g, &gt),
+                                seconds: t.elapsed().as_secs_f64(),
+                            }
+                        }
+                        Err(e) => {
+                            eprintln!("colmap failed on {}: {e}", ld.display());
+                            Outcome {
+                                registered: 0,
+                                points: 0,
+                                rmse_frac: None,
+                                seconds: t.elapsed().as_secs_f64(),
+                            }
+                        }
+                    };
                 results.push(("COLMAP 3.8", out));
             }
             for (name, o) in results {

@@ -4,47 +4,106 @@ mod common;
 
 use gems_init::sfm::{SfmError, SfmImage, SfmOptions, run_sfm, write_outputs};
 
-/// Level 1 (sharp) and level 7 (7 of 11 burst frames averaged; the full burst moves the image by
-/// 12 % of its width, so level 7 carries ≈ 7 % ≈ 17 px of blur at 240 px, the same fraction as
-/// 45 px at 640 px). Tolerance on the Sim(3)-aligned translation RMSE as a fraction of the camera
-/// path extent: 2 % sharp, 4 % at level 7.
-fn check_level(level: usize, tol: f64) {
-    let s = common::scene(12, 240, 180, level, 0.12, 42);
-    let r = run_sfm(&s.images, &SfmOptions::default()).expect("sfm");
+/// A `gems synth --blur-levels` scene (16 views, 240×160, the full 11-frame burst blurs by 30 px
+/// = 12.5 % of the width, so level 7 carries ≈ 18 px), generated once per test binary.
+fn synth_levels() -> &'static std::path::Path {
+    static DIR: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = gems_synth::SynthConfig {
+            width: 240,
+            height: 160,
+            views: 16,
+            blur_px: 30.0,
+            seed: 11,
+            ..gems_synth::SynthConfig::small()
+        };
+        gems_synth::generate_blur_levels(&cfg, &dir.path().join("s"), &mut |_, _| {}).unwrap();
+        dir
+    })
+    .path()
+}
+
+/// Sim(3)-aligned translation RMSE over the camera-path extent must stay below `tol` with every
+/// view registered and the focal estimated to within 25 %.
+fn check_level(level: usize, tol: f64, focal_from_metadata: bool) {
+    let ld = synth_levels().join(format!("s/blur_{level:02}"));
+    let rows = gems_data::llff::read_poses_bounds(&ld.join("poses_bounds.npy")).unwrap();
+    let gt: Vec<gems_init::sfm::Pose> = rows
+        .iter()
+        .map(|r| {
+            let p = r.pose();
+            gems_init::sfm::Pose {
+                r: nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_row_slice(
+                    &p.rotation.concat(),
+                )),
+                t: nalgebra::Vector3::from(p.translation),
+            }
+        })
+        .collect();
+    let images = gems_init::sfm::load_images(&ld).unwrap();
+    let opts = SfmOptions {
+        focal_px: focal_from_metadata.then(|| rows[0].focal()),
+        ..SfmOptions::default()
+    };
+    let r = run_sfm(&images, &opts).expect("sfm");
     let poses: Vec<_> = r.views.iter().map(|v| v.pose).collect();
-    eprintln!("level {level}: {:?}", r.stats);
     assert_eq!(
-        r.stats.registered, 12,
+        r.stats.registered,
+        images.len(),
         "unregistered: {:?}",
         r.stats.unregistered
     );
-    let err = common::aligned_rmse_fraction(&poses, &s.gt);
+    let err = common::aligned_rmse_fraction(&poses, &gt);
     eprintln!(
         "level {level}: rmse/extent {err:.4}, focal {:.1} (gt {:.1}), points {}, reproj {:.2}px, {:.1}s",
-        r.camera.focal, s.focal, r.stats.points, r.stats.mean_reprojection_error, r.stats.seconds
+        r.camera.focal,
+        rows[0].focal(),
+        r.stats.points,
+        r.stats.mean_reprojection_error,
+        r.stats.seconds
     );
     assert!(
         err < tol,
         "level {level}: translation RMSE fraction {err} ≥ {tol}"
     );
     assert!(
-        (r.camera.focal / s.focal - 1.0).abs() < 0.15,
+        (r.camera.focal / rows[0].focal() - 1.0).abs() < 0.25,
         "focal {} vs {}",
         r.camera.focal,
-        s.focal
+        rows[0].focal()
     );
     assert!(r.stats.points >= 100);
-    assert!(r.stats.mean_reprojection_error < 3.0);
+    assert!(r.stats.mean_reprojection_error < 2.0);
 }
 
 #[test]
 fn poses_align_to_ground_truth_sharp() {
-    check_level(1, 0.02);
+    check_level(1, 0.01, false);
 }
 
 #[test]
 fn poses_align_to_ground_truth_blur_level_7() {
-    check_level(7, 0.04);
+    check_level(7, 0.04, true);
+}
+
+/// Our own harsher scene (busy texture, blur along random directions): level 1 must be exact
+/// to 1 %, and a level-7 capture (≈ 17 px of blur at 240 px) must still register every view.
+#[test]
+fn busy_texture_scene_sharp_and_blurred() {
+    let s = common::scene(12, 240, 180, 1, 0.12, 42);
+    let r = run_sfm(&s.images, &SfmOptions::default()).expect("sfm");
+    let poses: Vec<_> = r.views.iter().map(|v| v.pose).collect();
+    assert_eq!(r.stats.registered, 12);
+    let err = common::aligned_rmse_fraction(&poses, &s.gt);
+    assert!(err < 0.01, "sharp: {err}");
+    let s = common::scene(12, 240, 180, 7, 0.12, 42);
+    let r = run_sfm(&s.images, &SfmOptions::default()).expect("sfm");
+    assert_eq!(
+        r.stats.registered, 12,
+        "unregistered: {:?}",
+        r.stats.unregistered
+    );
 }
 
 #[test]

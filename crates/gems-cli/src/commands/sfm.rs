@@ -15,7 +15,7 @@ pub struct Args {
     /// Focal length in pixels when known (held fixed); estimated otherwise.
     #[arg(long)]
     pub focal: Option<f64>,
-    /// Long side (px) of the pyramid levels to try, in order (default: 192,128,288).
+    /// Long side (px) of the pyramid levels to try, in order (default: 192,128,96).
     #[arg(long, value_delimiter = ',')]
     pub working_size: Option<Vec<u32>>,
     /// Keypoints per image.
@@ -35,15 +35,23 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     if args.colmap_cli {
-        let img_dir = if args.scene.join("images").is_dir() { args.scene.join("images") } else { args.scene.clone() };
+        let img_dir = if args.scene.join("images").is_dir() {
+            args.scene.join("images")
+        } else {
+            args.scene.clone()
+        };
         let opts = ColmapCliOptions {
             binary: args.colmap_binary.clone(),
             focal_px: args.focal,
             use_gpu: false,
         };
         let (model, dir) = sfm::run_colmap_cli(&img_dir, &args.out.join("colmap_work"), &opts)?;
-        gems_data::colmap::write_model(&args.out.join("sparse/0"), &model, gems_data::colmap::ModelFormat::Binary)
-            .context("writing the imported COLMAP model")?;
+        gems_data::colmap::write_model(
+            &args.out.join("sparse/0"),
+            &model,
+            gems_data::colmap::ModelFormat::Binary,
+        )
+        .context("writing the imported COLMAP model")?;
         println!(
             "COLMAP registered {} images, {} points (model {}); written to {}",
             model.images.len(),
@@ -71,7 +79,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let s = &result.stats;
     println!(
         "registered {}/{} views, {} points, mean track length {:.2}, reprojection error {:.2} px, focal {:.1} px, {:.1} s",
-        s.registered, s.total, s.points, s.mean_track_length, s.mean_reprojection_error, s.focal, s.seconds
+        s.registered,
+        s.total,
+        s.points,
+        s.mean_track_length,
+        s.mean_reprojection_error,
+        s.focal,
+        s.seconds
     );
     if !s.unregistered.is_empty() {
         println!("unregistered: {}", s.unregistered.join(", "));

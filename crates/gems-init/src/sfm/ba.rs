@@ -88,6 +88,15 @@ pub fn total_cost(
         .sum()
 }
 
+/// Partial Schur sums of one chunk of points: reduced matrix and vector, and per point the
+/// inverse damped 3×3 block (None when singular) and the point gradient.
+type ChunkSums = (
+    DMatrix<f64>,
+    DVector<f64>,
+    Vec<Option<Matrix3<f64>>>,
+    Vec<Vector3<f64>>,
+);
+
 /// Per-observation Jacobians and residual. Camera block columns: ω (3), v (3), f (1).
 struct Lin {
     jc: SMatrix<f64, 2, 7>,
@@ -198,12 +207,7 @@ pub fn bundle_adjust(
         let mut accepted = false;
         for _attempt in 0..8 {
             // Per-point 3×3 blocks with damping; Schur complement into S, b.
-            let chunks: Vec<(
-                DMatrix<f64>,
-                DVector<f64>,
-                Vec<Option<Matrix3<f64>>>,
-                Vec<Vector3<f64>>,
-            )> = (0..npts.div_ceil(CHUNK))
+            let chunks: Vec<ChunkSums> = (0..npts.div_ceil(CHUNK))
                 .into_par_iter()
                 .map(|ch| {
                     let mut s = DMatrix::<f64>::zeros(n, n);
@@ -305,9 +309,9 @@ pub fn bundle_adjust(
                         let Some(l) = &lins[oi] else { continue };
                         let c = cols(&obs[oi]);
                         let w = l.jc.transpose() * l.jp * l.w;
-                        for a in 0..7 {
-                            if let Some(x) = c[a] {
-                                rhs -= w.row(a).transpose() * dc[x];
+                        for (a, ca) in c.iter().enumerate() {
+                            if let Some(x) = ca {
+                                rhs -= w.row(a).transpose() * dc[*x];
                             }
                         }
                     }

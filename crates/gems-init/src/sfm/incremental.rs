@@ -338,14 +338,13 @@ fn initial_pair(
 }
 
 /// Full incremental reconstruction of `tracks` with intrinsics `k` (working level); `pairs`
-/// are the two-view correspondences the initial pair is chosen from. `refine_focal` frees the
-/// focal in bundle adjustment once three views are registered. None when no initial pair exists.
+/// are the two-view correspondences the initial pair is chosen from; the focal is held
+/// fixed. None when no initial pair exists.
 pub(crate) fn reconstruct(
     tracks: Vec<Track>,
     pairs: &[PairCorr],
     nviews: usize,
     k: Intrinsics,
-    refine_focal: bool,
     opts: &SfmOptions,
 ) -> Option<Recon> {
     let (i0, j0, rel) = initial_pair(pairs, &k, opts)?;
@@ -422,7 +421,7 @@ pub(crate) fn reconstruct(
         let Some(v) = registered else { break };
         let added = triangulate_all(&mut r, opts);
         let nreg = r.registered();
-        run_ba(&mut r, i0, refine_focal && nreg >= 3, 15, opts);
+        run_ba(&mut r, i0, false, 15, opts);
         filter_outliers(&mut r, opts);
         tracing::debug!(
             view = v,
@@ -432,12 +431,28 @@ pub(crate) fn reconstruct(
         );
     }
     triangulate_all(&mut r, opts);
-    run_ba(&mut r, i0, refine_focal, 50, opts);
+    run_ba(&mut r, i0, false, 50, opts);
     filter_outliers(&mut r, opts);
     triangulate_all(&mut r, opts);
-    run_ba(&mut r, i0, refine_focal, 30, opts);
+    run_ba(&mut r, i0, false, 30, opts);
     filter_outliers(&mut r, opts);
     Some(r)
+}
+
+/// Free the focal in a final bundle adjustment, keeping the result only when the focal stays in
+/// `[lo, hi]` (the bracket of the focal search): outside it the focal is drifting along its weak
+/// direction (blur biases the observations), not converging.
+pub(crate) fn refine_focal_bounded(
+    r: &Recon,
+    lo: f64,
+    hi: f64,
+    opts: &SfmOptions,
+) -> Option<Recon> {
+    let fixed = r.poses.iter().position(|p| p.is_some())?;
+    let mut out = r.clone();
+    run_ba(&mut out, fixed, true, 50, opts);
+    filter_outliers(&mut out, opts);
+    (out.k.f >= lo && out.k.f <= hi && out.registered() == r.registered()).then_some(out)
 }
 
 #[cfg(test)]

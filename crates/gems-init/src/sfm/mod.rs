@@ -10,10 +10,12 @@
 //!    poses; further views are added by RANSAC PnP, tracks are triangulated with angle,
 //!    depth and reprojection checks, and a robust (Huber) Levenberg–Marquardt bundle adjustment
 //!    with a Schur complement over points runs after each registration ([`ba`]);
-//! 4. the focal length is taken from [`SfmOptions::focal_px`] when known; otherwise every
-//!    candidate in [`SfmOptions::focal_candidates`] seeds a reconstruction with the focal free in
-//!    bundle adjustment, and the one registering most views with the lowest error wins. Each
-//!    working size is tried in turn until all views register.
+//! 4. the focal length is taken from [`SfmOptions::focal_px`] when known; otherwise a
+//!    reconstruction is made with each candidate of [`SfmOptions::focal_candidates`] held fixed
+//!    (a free focal drifts along its weak direction under blur), the one registering most views
+//!    with the lowest error wins, and a final bundle adjustment refines the focal inside the
+//!    bracket of its neighbouring candidates. Each working size is tried in turn until all views
+//!    register.
 //!
 //! Every input view is either registered or listed in [`SfmStats::unregistered`]. Fewer than two
 //! registered views is an error ([`SfmError::TooFewRegistered`]), as are degenerate inputs.
@@ -30,9 +32,9 @@ mod output;
 mod tracking;
 
 pub use colmap_cli::{ColmapCliOptions, run_colmap_cli};
+pub use gems_data::colmap::SparseModel;
 pub use geometry::Pose;
 pub use output::{draw_top_view, to_colmap_model, write_outputs};
-pub use gems_data::colmap::SparseModel;
 
 use features::{FeatureParams, Features, Gray};
 use rayon::prelude::*;
@@ -73,8 +75,8 @@ impl Default for SfmOptions {
     fn default() -> Self {
         SfmOptions {
             focal_px: None,
-            focal_candidates: vec![0.7, 1.0, 1.5],
-            working_sizes: vec![192, 128, 288],
+            focal_candidates: vec![0.6, 0.75, 0.9, 1.1, 1.35, 1.7],
+            working_sizes: vec![192, 128, 96],
             max_features: 500,
             min_pair_inliers: 20,
             max_reproj_px: 2.0,
@@ -216,7 +218,11 @@ pub(crate) struct PairMatches {
 /// The images of a scene folder: `<dir>/images/*` when that folder exists, else `<dir>/*`
 /// (png/jpg/jpeg), sorted by file name.
 pub fn load_images(dir: &std::path::Path) -> Result<Vec<SfmImage>, SfmError> {
-    let img_dir = if dir.join("images").is_dir() { dir.join("images") } else { dir.to_path_buf() };
+    let img_dir = if dir.join("images").is_dir() {
+        dir.join("images")
+    } else {
+        dir.to_path_buf()
+    };
     let read_err = |e: std::io::Error| SfmError::Read {
         path: img_dir.clone(),
         source: Box::new(e),
@@ -226,9 +232,9 @@ pub fn load_images(dir: &std::path::Path) -> Result<Vec<SfmImage>, SfmError> {
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
             p.is_file()
-                && p.extension()
-                    .and_then(|e| e.to_str())
-                    .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg"))
+                && p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+                    matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg")
+                })
         })
         .collect();
     files.sort();
@@ -244,7 +250,10 @@ pub fn load_images(dir: &std::path::Path) -> Result<Vec<SfmImage>, SfmError> {
                     source: Box::new(e),
                 })?
                 .to_rgb8();
-            let name = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            let name = p
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
             Ok(SfmImage { name, image })
         })
         .collect()
@@ -297,23 +306,22 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
             textureless = Some(names);
         }
         let tr = Instant::now();
-        let focals: Vec<(f64, bool)> = match opts.focal_px {
-            Some(f) => vec![(f * scale, false)],
+        let focals: Vec<f64> = match opts.focal_px {
+            Some(f) => vec![f * scale],
             None => opts
                 .focal_candidates
                 .iter()
-                .map(|c| (c * long * scale, true))
+                .map(|c| c * long * scale)
                 .collect(),
         };
         let (sw, sh) = (w as f64 * scale, h as f64 * scale);
-        for (f, refine) in focals {
+        for f in focals {
             let k = ba::Intrinsics {
                 f,
                 cx: 0.5 * sw,
                 cy: 0.5 * sh,
             };
-            let rec =
-                incremental::reconstruct(tracks.clone(), &corrs, images.len(), k, refine, opts);
+            let rec = incremental::reconstruct(tracks.clone(), &corrs, images.len(), k, opts);
             let Some(rec) = rec else { continue };
             let nreg = rec.registered();
             let err = rec.mean_error() / scale;
@@ -344,13 +352,36 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
             break;
         }
     }
-    let Some((rec, ws, scale)) = best else {
+    let Some((mut rec, ws, scale)) = best else {
         return Err(SfmError::TooFewRegistered {
             registered: 0,
             total: images.len(),
             unregistered: images.iter().map(|i| i.name.clone()).collect(),
         });
     };
+    if opts.focal_px.is_none() {
+        // Bracket: halfway (geometrically) to the neighbouring candidates of the winner.
+        let f0 = rec.k.f;
+        let mut c: Vec<f64> = opts
+            .focal_candidates
+            .iter()
+            .map(|c| c * long * scale)
+            .collect();
+        c.sort_by(|a, b| a.total_cmp(b));
+        let lo = c
+            .iter()
+            .rev()
+            .find(|&&x| x < f0 * 0.999)
+            .map_or(f0 * 0.8, |x| (x * f0).sqrt());
+        let hi = c
+            .iter()
+            .find(|&&x| x > f0 * 1.001)
+            .map_or(f0 * 1.25, |x| (x * f0).sqrt());
+        if let Some(r) = incremental::refine_focal_bounded(&rec, lo, hi, opts) {
+            tracing::info!(focal = r.k.f / scale, "focal refined");
+            rec = r;
+        }
+    }
     let mut result = output::assemble(images, &rec, scale, opts.focal_px.is_some(), ws);
     result.stats.seconds = t0.elapsed().as_secs_f64();
     result.stats.seconds_features = t_feat;
@@ -375,7 +406,11 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
         ));
     }
     if opts.focal_px.is_none()
-        && (opts.focal_candidates.is_empty() || opts.focal_candidates.iter().any(|c| !(*c > 0.0)))
+        && (opts.focal_candidates.is_empty()
+            || opts
+                .focal_candidates
+                .iter()
+                .any(|c| c.is_nan() || *c <= 0.0))
     {
         return Err(SfmError::InvalidOption(
             "focal candidates must be positive and non-empty".into(),
@@ -384,7 +419,7 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
     if opts.focal_px.is_some_and(|f| !(f > 0.0 && f.is_finite())) {
         return Err(SfmError::InvalidOption("focal_px must be positive".into()));
     }
-    if opts.max_features < 16 || !(opts.max_reproj_px > 0.0) {
+    if opts.max_features < 16 || opts.max_reproj_px.is_nan() || opts.max_reproj_px <= 0.0 {
         return Err(SfmError::InvalidOption(
             "max_features ≥ 16 and max_reproj_px > 0 required".into(),
         ));
@@ -534,7 +569,8 @@ fn all_tracks(
     }
     let wl = work[0].w.max(work[0].h) as f32;
     let tp = tracking::TrackParams {
-        half: ((wl * 0.045).round() as i32).clamp(4, 10),
+        // Large patches: at extreme blur only coarse structure is distinctive.
+        half: ((wl * 0.09).round() as i32).clamp(4, 10),
         radius: ((wl * 0.07).round() as i32).clamp(5, 20),
         neighbours: 4,
         min_ncc: 0.75,

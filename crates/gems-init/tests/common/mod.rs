@@ -190,13 +190,13 @@ fn render(
                         best = (s, lookup(&texs[p.tex], a, b));
                     }
                 }
-                for k in 0..3 {
-                    col[k] += 0.25 * best.1[k];
+                for (c, b) in col.iter_mut().zip(best.1) {
+                    *c += 0.25 * b;
                 }
             }
             let i = 3 * (y * w + x) as usize;
-            for k in 0..3 {
-                acc[i + k] += col[k];
+            for (a, c) in acc[i..i + 3].iter_mut().zip(col) {
+                *a += c;
             }
         }
     }
