@@ -218,21 +218,23 @@ pub fn draw_top_view(r: &SfmResult, size: u32) -> image::RgbImage {
         .iter()
         .map(|p| (proj(&Vector3::new(p.xyz[0], p.xyz[1], p.xyz[2])), p.rgb))
         .collect();
-    // Robust extent: 2nd–98th percentile of everything, so stray points do not shrink the plot.
-    let mut xs: Vec<f64> = centres
-        .iter()
-        .chain(pts.iter().map(|p| &p.0))
-        .map(|p| p.x)
-        .collect();
-    let mut ys: Vec<f64> = centres
-        .iter()
-        .chain(pts.iter().map(|p| &p.0))
-        .map(|p| p.y)
-        .collect();
+    // Extent: all camera centres plus the 2nd–98th percentile of the points, so that stray
+    // points do not shrink the plot and the cameras are always inside it.
+    let mut xs: Vec<f64> = pts.iter().map(|p| p.0.x).collect();
+    let mut ys: Vec<f64> = pts.iter().map(|p| p.0.y).collect();
     xs.sort_by(|a, b| a.total_cmp(b));
     ys.sort_by(|a, b| a.total_cmp(b));
-    let q = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
-    let (x0, x1, y0, y1) = (q(&xs, 0.02), q(&xs, 0.98), q(&ys, 0.02), q(&ys, 0.98));
+    let q = |v: &[f64], f: f64| {
+        v.get(((v.len().max(1) - 1) as f64 * f).round() as usize)
+            .copied()
+    };
+    let fold = |init: Option<f64>, f: fn(f64, f64) -> f64, vals: &mut dyn Iterator<Item = f64>| {
+        vals.fold(init, |acc, v| Some(acc.map_or(v, |a| f(a, v))))
+    };
+    let x0 = fold(q(&xs, 0.02), f64::min, &mut centres.iter().map(|c| c.x)).unwrap_or(0.0);
+    let x1 = fold(q(&xs, 0.98), f64::max, &mut centres.iter().map(|c| c.x)).unwrap_or(0.0);
+    let y0 = fold(q(&ys, 0.02), f64::min, &mut centres.iter().map(|c| c.y)).unwrap_or(0.0);
+    let y1 = fold(q(&ys, 0.98), f64::max, &mut centres.iter().map(|c| c.y)).unwrap_or(0.0);
     let cx = 0.5 * (x0 + x1);
     let cy = 0.5 * (y0 + y1);
     let span = (x1 - x0).max(y1 - y0).max(1e-9) * 1.1;
