@@ -148,14 +148,19 @@ fn known_focal_is_kept_and_outputs_are_written() {
 }
 
 #[test]
-fn same_seed_same_result() {
+fn same_seed_same_result_on_any_thread_count() {
     let s = common::scene(5, 160, 120, 1, 0.12, 3);
     let opts = SfmOptions {
         working_sizes: vec![160],
         ..SfmOptions::default()
     };
     let a = run_sfm(&s.images, &opts).unwrap();
-    let b = run_sfm(&s.images, &opts).unwrap();
+    // Same seed on one thread: identical, so the result does not depend on the thread count.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let b = pool.install(|| run_sfm(&s.images, &opts)).unwrap();
     assert_eq!(a.points.len(), b.points.len());
     for (x, y) in a.views.iter().zip(&b.views) {
         assert_eq!(x.pose, y.pose);
@@ -255,4 +260,16 @@ fn mismatched_sizes_are_a_clear_error() {
     ];
     let e = run_sfm(&imgs, &SfmOptions::default()).unwrap_err();
     assert!(e.to_string().contains("b.png"), "{e}");
+}
+
+#[test]
+fn missing_colmap_binary_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = gems_init::sfm::ColmapCliOptions {
+        binary: "/nonexistent/colmap".into(),
+        ..Default::default()
+    };
+    let e =
+        gems_init::sfm::run_colmap_cli(dir.path(), &dir.path().join("work"), &opts).unwrap_err();
+    assert!(e.to_string().contains("could not start"), "{e}");
 }
