@@ -4,6 +4,7 @@ pub mod edi;
 pub mod eval;
 pub mod events;
 pub mod info;
+pub mod pipeline;
 pub mod render;
 pub mod sfm;
 pub mod synth;

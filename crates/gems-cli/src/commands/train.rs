@@ -2,15 +2,13 @@
 //! images (gems-train), with periodic atomic checkpoints and `--resume`, then `point_cloud.ply`
 //! (input frame), the trained model, and gems-eval's metrics, trajectories and report.
 
-use std::io::Write;
-use std::path::PathBuf;
-use std::time::Instant;
+use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use gems_train::TrainConfig;
-use gems_train::io::{TrainOutput, has_checkpoint, load_checkpoint, save_checkpoint};
-use gems_train::prepare::{InitMode, prepare_input};
-use gems_train::trainer::Trainer;
+use gems_train::prepare::InitMode;
+
+use super::pipeline::{TrainJob, train_and_report};
 
 /// Initialisation of poses and points.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -21,7 +19,7 @@ pub enum Init {
     Gt,
     /// Ground-truth poses perturbed by seeded noise (labelled as such in the outputs).
     GtNoisy,
-    /// Built-in SfM on the blurry images.
+    /// Built-in blur-robust SfM on the scene's images (written to `<output>/sfm`).
     Sfm,
 }
 
@@ -59,9 +57,13 @@ pub struct Args {
     /// Continue from the checkpoint in the output folder.
     #[arg(long)]
     pub resume: bool,
-    /// Use the scene's events: EDI-deblurred images for initialisation.
+    /// Use the scene's events: EDI-deblurred images (written to `<output>/edi`) feed the SfM
+    /// initialisation only; training is still supervised by the blurry images. Implies --init sfm.
     #[arg(long)]
     pub events: bool,
+    /// Event contrast threshold for EDI (the simulator's or camera's C).
+    #[arg(long, default_value_t = 0.2)]
+    pub event_threshold: f32,
     /// Skip evaluation and report (train and export only).
     #[arg(long)]
     pub no_eval: bool,
@@ -71,23 +73,6 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.events {
-        bail!(
-            "--events (EDI initialisation) is not wired into `gems train` yet: run `gems edi` and train on its output"
-        );
-    }
-    let mode = match args.init {
-        Init::Colmap => InitMode::Colmap(args.colmap_model.clone()),
-        Init::Gt => InitMode::Gt,
-        Init::GtNoisy => InitMode::GtNoisy {
-            translation_std: args.noise_translation,
-            rotation_std: args.noise_rotation,
-        },
-        Init::Sfm => bail!(
-            "--init sfm: run `gems sfm {}` first (it writes sparse/0), then use --init colmap",
-            args.scene.display()
-        ),
-    };
     let mut cfg = match &args.config {
         Some(p) => TrainConfig::from_toml_file(p)?,
         None => TrainConfig::default(),
@@ -100,95 +85,91 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("invalid configuration: {e}"))?;
-    let opts = gems_data::OpenOptions {
+    let init = if args.events { Init::Sfm } else { args.init };
+    let mode = match init {
+        Init::Colmap => InitMode::Colmap(args.colmap_model.clone()),
+        Init::Gt => InitMode::Gt,
+        Init::GtNoisy => InitMode::GtNoisy {
+            translation_std: args.noise_translation,
+            rotation_std: args.noise_rotation,
+        },
+        Init::Sfm => {
+            let images = if args.events {
+                edi_images(&args.scene, &args.output, args.event_threshold)?
+            } else {
+                args.scene.clone()
+            };
+            InitMode::Colmap(Some(run_sfm(&images, &args.output.join("sfm"), cfg.seed)?))
+        }
+    };
+    let report = train_and_report(TrainJob {
+        scene: &args.scene,
+        output: &args.output,
+        mode,
+        cfg,
         downscale: args.downscale,
+        resume: args.resume,
+        evaluate: !args.no_eval,
+        lpips: &args.lpips,
+    })?;
+    if let Some(report) = report {
+        println!("report: {}", report.display());
+    }
+    Ok(())
+}
+
+/// EDI-deblurs the scene's blurry images with its events into `<output>/edi` (a scene folder)
+/// and returns that folder. An existing folder from an earlier run is reused.
+pub fn edi_images(scene: &Path, output: &Path, threshold: f32) -> anyhow::Result<PathBuf> {
+    let dir = output.join("edi");
+    if dir.join("images").is_dir() {
+        tracing::info!(dir = %dir.display(), "reusing EDI images");
+        return Ok(dir);
+    }
+    let s = gems_data::open_scene(scene, &gems_data::OpenOptions::default())
+        .with_context(|| format!("opening scene {}", scene.display()))?;
+    if s.events.stream.is_none() && s.events.bin_counts.is_none() {
+        anyhow::bail!(
+            "--events: {} has no event stream or event bins",
+            scene.display()
+        );
+    }
+    let cfg = gems_init::edi::EdiConfig {
+        thresholds: gems_init::edi::Thresholds::equal(threshold),
         ..Default::default()
     };
-    let scene = gems_data::open_scene(&args.scene, &opts)
-        .with_context(|| format!("opening scene {}", args.scene.display()))?;
-    std::fs::create_dir_all(&args.output)
-        .with_context(|| format!("creating {}", args.output.display()))?;
+    let edi = gems_init::edi::deblur_scene(&s, &cfg)?;
+    gems_init::edi::write_edi_scene(&s, &edi, &dir)?;
+    tracing::info!(dir = %dir.display(), views = edi.views.len(), "EDI images written");
+    Ok(dir)
+}
 
-    let mut trainer = if args.resume && has_checkpoint(&args.output) {
-        let (ckpt_cfg, state) = load_checkpoint(&args.output)?;
-        let input = prepare_input(&scene, &mode, &ckpt_cfg)?;
-        tracing::info!(step = state.step, "resuming from checkpoint");
-        Trainer::from_state(
-            ckpt_cfg,
-            input.views,
-            input.normalization,
-            input.scene_scale,
-            input.init_label,
-            state,
-        )?
-    } else {
-        if args.resume {
-            tracing::warn!(
-                "--resume: no checkpoint in {}, starting fresh",
-                args.output.display()
-            );
-        }
-        let input = prepare_input(&scene, &mode, &cfg)?;
-        tracing::info!(views = input.views.len(), gaussians = input.gaussians.len(), init = %input.init_label, "training");
-        Trainer::new(cfg, input)?
+/// Runs the built-in SfM on `images` (a scene folder or an image folder), writes its outputs to
+/// `out` and returns the COLMAP model folder. Views it could not register are reported by name.
+pub fn run_sfm(images: &Path, out: &Path, seed: u64) -> anyhow::Result<PathBuf> {
+    let imgs = gems_init::sfm::load_images(images)?;
+    let opts = gems_init::sfm::SfmOptions {
+        seed,
+        ..Default::default()
     };
-    gems_train::io::write_atomic(
-        &args.output.join("config.toml"),
-        trainer.cfg.to_toml().as_bytes(),
-    )?;
-
-    let start = Instant::now();
-    let first = trainer.state.step;
-    let out_dir = args.output.clone();
-    trainer.run(|t, r| {
-        let done = r.step - first;
-        let rate = done as f64 / start.elapsed().as_secs_f64().max(1e-9);
-        let eta = (t.cfg.steps - r.step) as f64 / rate.max(1e-9);
-        eprint!(
-            "\rstep {}/{}  loss {:.4}  PSNR {:.2}  Gaussians {}  {:.2} steps/s  ETA {:.0}s   ",
-            r.step, t.cfg.steps, r.loss, r.psnr, r.gaussians, rate, eta
+    tracing::info!(images = imgs.len(), "structure from motion");
+    let result = gems_init::sfm::run_sfm(&imgs, &opts)?;
+    gems_init::sfm::write_outputs(&result, out)?;
+    let st = &result.stats;
+    tracing::info!(
+        registered = st.registered,
+        total = st.total,
+        points = st.points,
+        reprojection_px = st.mean_reprojection_error,
+        "sfm done"
+    );
+    if !st.unregistered.is_empty() {
+        tracing::warn!(
+            "SfM could not register {} of {} views: {}",
+            st.unregistered.len(),
+            st.total,
+            st.unregistered.join(", ")
         );
-        let _ = std::io::stderr().flush();
-        let every = t.cfg.checkpoint_every;
-        if every > 0 && r.step % every == 0 && r.step < t.cfg.steps {
-            save_checkpoint(&out_dir, t)?;
-        }
-        Ok(())
-    })?;
-    eprintln!();
-    save_checkpoint(&args.output, &trainer)?;
-    let output = TrainOutput::from_trainer(&trainer);
-    output.save(&args.output)?;
-    let ply = args.output.join("point_cloud.ply");
-    let g_input = output
-        .normalization
-        .gaussians_to_input_frame(&output.gaussians);
-    gems_splat::ply::write_ply(&ply, &g_input)?;
-    tracing::info!(path = %ply.display(), seconds = output.seconds, steps = output.steps, "trained");
-
-    if args.no_eval {
-        return Ok(());
     }
-    let scene = gems_eval::trainer_eval::open_scene_for(&output, &args.scene, None)?;
-    let data = gems_eval::eval_data_from_scene(&output, &scene)?;
-    let lpips = if args.lpips.is_empty() {
-        tracing::warn!("no --lpips weights given: LPIPS will be reported as absent");
-        None
-    } else {
-        Some(gems_metrics::Lpips::load(&args.lpips)?)
-    };
-    let eval = gems_eval::evaluate_output(
-        &output,
-        &data,
-        &gems_eval::PoseRefineConfig::default(),
-        lpips.as_ref(),
-    )?;
-    gems_eval::write_metrics_json(&args.output.join("metrics.json"), &eval.metrics)?;
-    gems_eval::write_trajectories(&args.output, &output)?;
-    let report = gems_eval::write_report(
-        &args.output,
-        &gems_eval::report_input(&output, &data, &eval, 4),
-    )?;
-    println!("report: {}", report.display());
-    Ok(())
+    Ok(out.join("sparse").join("0"))
 }
