@@ -5,8 +5,10 @@
 //! 30 000 steps but stops at 7 000; our schedules are defined over the *run length* instead, and
 //! the defaults are chosen so that a 7 000-step run reproduces PRISM3D's effective behaviour
 //! (means lr ends at 0.01^(7/30) ≈ 0.341× its start, pose lr at 1e-3^(7/30) ≈ 0.200×).
-//! Step windows (SH degree ramp, MCMC refinement) are expressed as fractions of the run length
-//! referred to the 7 000-step reference run, so a short test run has the same shape.
+//! Step windows (SH degree ramp, MCMC refinement window) are expressed as fractions of the run
+//! length referred to the 7 000-step reference run, so a short run has the same shape. The MCMC
+//! refinement *period* stays an absolute step count (gsplat: 100): each refinement grows the set
+//! by 5 %, so a period that shrank with the run would multiply the Gaussians of a short run.
 
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -99,10 +101,11 @@ pub struct McmcConfig {
     pub growth_factor: f64,
     /// SGLD noise multiplier (times the current means lr).
     pub noise_lr: f32,
-    /// Refinement window and period as fractions of the run (×7000 = gsplat's 500/25000/100).
+    /// Refinement window as fractions of the run (×7000 = gsplat's 500/25000).
     pub refine_start_fraction: f64,
     pub refine_stop_fraction: f64,
-    pub refine_every_fraction: f64,
+    /// Refinement period in steps (gsplat: 100), independent of the run length.
+    pub refine_every: usize,
     /// Opacity and scale regularisers added to the loss.
     pub opacity_reg: f32,
     pub scale_reg: f32,
@@ -117,7 +120,7 @@ impl Default for McmcConfig {
             noise_lr: 5e5,
             refine_start_fraction: 500.0 / REFERENCE_STEPS as f64,
             refine_stop_fraction: 25_000.0 / REFERENCE_STEPS as f64,
-            refine_every_fraction: 100.0 / REFERENCE_STEPS as f64,
+            refine_every: 100,
             opacity_reg: 0.01,
             scale_reg: 0.01,
         }
@@ -325,7 +328,7 @@ impl TrainConfig {
     pub fn is_refine_step(&self, step: usize) -> bool {
         let start = self.steps_of(self.mcmc.refine_start_fraction);
         let stop = self.steps_of(self.mcmc.refine_stop_fraction);
-        let every = self.steps_of(self.mcmc.refine_every_fraction).max(1);
+        let every = self.mcmc.refine_every.max(1);
         step > start && step < stop && step.is_multiple_of(every)
     }
 }
@@ -369,8 +372,11 @@ mod tests {
             steps: 700,
             ..TrainConfig::default()
         };
-        assert!(c.is_refine_step(60));
+        // Window (50, 2500) scales with the run; the period stays 100 steps.
+        assert!(c.is_refine_step(100));
         assert!(!c.is_refine_step(50));
+        assert!(!c.is_refine_step(60));
+        assert_eq!((0..700).filter(|&s| c.is_refine_step(s)).count(), 6);
         assert_eq!(c.sh_degree_at(100), 1);
         let ratio = c.means_lr(700, 2.0) / c.means_lr(0, 2.0);
         assert!((ratio - 0.3412).abs() < 1e-3);

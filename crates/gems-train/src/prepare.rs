@@ -105,24 +105,48 @@ pub fn prepare_input(
         }
     };
     let mut raw = Vec::new();
+    // Views an SfM model did not register cannot be trained on; they are named, never dropped
+    // silently (their SfM report lists them too).
+    let mut unregistered = Vec::new();
     for v in scene.train_views() {
-        let pose = match mode {
-            InitMode::Colmap(Some(_)) => model
-                .as_ref()
-                .and_then(|m| m.image_by_name(&v.name))
-                .map(|i| i.pose()),
-            InitMode::Colmap(None) => v.pose,
-            InitMode::Gt | InitMode::GtNoisy { .. } => v.gt_pose,
+        let (pose, k) = match mode {
+            InitMode::Colmap(Some(_)) => {
+                let m = model.as_ref().expect("colmap mode loads a model");
+                let Some(img) = m.image_by_name(&v.name) else {
+                    unregistered.push(v.name.clone());
+                    continue;
+                };
+                let cam = m.camera(img.camera_id).ok_or_else(|| {
+                    TrainError::Input(format!(
+                        "COLMAP model: image {} refers to missing camera {}",
+                        img.name, img.camera_id
+                    ))
+                })?;
+                let k = cam.intrinsics().map_err(|e| {
+                    TrainError::Input(format!("COLMAP model: camera {}: {e}", cam.id))
+                })?;
+                (img.pose(), Some(k.resized(v.width, v.height)))
+            }
+            InitMode::Colmap(None) => match v.pose {
+                Some(p) => (p, v.intrinsics),
+                None => {
+                    unregistered.push(v.name.clone());
+                    continue;
+                }
+            },
+            InitMode::Gt | InitMode::GtNoisy { .. } => {
+                let Some(p) = v.gt_pose else {
+                    return Err(TrainError::Input(format!(
+                        "view {} ({}) has no ground-truth pose for {}",
+                        v.name,
+                        v.image.display(),
+                        mode.label()
+                    )));
+                };
+                (p, v.intrinsics)
+            }
         };
-        let Some(pose) = pose else {
-            return Err(TrainError::Input(format!(
-                "view {} ({}) has no initial pose for {}",
-                v.name,
-                v.image.display(),
-                mode.label()
-            )));
-        };
-        let k = v.intrinsics.ok_or_else(|| {
+        let k = k.ok_or_else(|| {
             TrainError::Input(format!(
                 "view {} ({}) has no intrinsics",
                 v.name,
@@ -156,10 +180,20 @@ pub fn prepare_input(
             v.gt_pose.as_ref().map(c2w_of),
         ));
     }
+    if !unregistered.is_empty() {
+        tracing::warn!(
+            "{} of {} training views have no pose in the {} and are not trained on: {}",
+            unregistered.len(),
+            unregistered.len() + raw.len(),
+            mode.label(),
+            unregistered.join(", ")
+        );
+    }
     if raw.is_empty() {
         return Err(TrainError::Input(format!(
-            "{}: no training views",
-            scene.root.display()
+            "{}: no training view has an initial pose ({})",
+            scene.root.display(),
+            mode.label()
         )));
     }
 

@@ -17,7 +17,7 @@ fn small_config() -> TrainConfig {
     };
     c.pose.accumulate_steps = 5;
     c.mcmc.cap_max = 700;
-    c.mcmc.refine_every_fraction = 0.25; // refine at steps 6, 12, 18
+    c.mcmc.refine_every = 6; // refine at steps 6, 12, 18
     c.mcmc.refine_start_fraction = 0.1;
     c
 }
