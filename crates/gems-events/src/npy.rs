@@ -341,6 +341,8 @@ pub fn write_events_npz(path: &Path, events: &EventStream) -> Result<(), EventEr
             npyz::zip::write::FileOptions::default()
                 .compression_method(npyz::zip::CompressionMethod::Stored)
                 .large_file(true)
+                // A fixed timestamp: the same events give a byte-identical file.
+                .last_modified_time(npyz::zip::DateTime::default())
         };
         fn put<T: npyz::Serialize + npyz::AutoSerialize + Copy, W: std::io::Write + Seek>(
             npz: &mut npyz::npz::NpzWriter<W>,
