@@ -664,21 +664,81 @@ fn exp_neg(x: f32) -> f32 {
     // Round to nearest without `floor` (a libm call on baseline x86-64).
     const MAGIC: f32 = 12_582_912.0;
     let x = x.clamp(-87.0, 0.0);
-    let n = (x * LOG2E + MAGIC) - MAGIC;
+    let m = x * LOG2E + MAGIC;
+    let n = m - MAGIC;
+    // m lies in [2²³, 2²⁴), where the spacing is 1, so its bits minus MAGIC's are the integer
+    // n exactly; unlike `n as i32` (saturating, scalar code) this vectorises.
+    let ni = m.to_bits() as i32 - MAGIC.to_bits() as i32;
     let r = (x - n * LN2_HI) - n * LN2_LO;
     let p = 1.0
         + r * (1.0
             + r * (0.5
                 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
-    let scale = f32::from_bits(((n as i32 + 127) as u32) << 23);
+    let scale = f32::from_bits(((ni + 127) as u32) << 23);
     p * scale
 }
 
-/// Composites one tile front to back: splats in depth order, each over the pixels of its box,
-/// with per-pixel state in structure-of-arrays tile buffers. The pixel loop is branch-free
-/// (selects instead of `continue`) so that it vectorises; skipped pixels add exact zeros.
+/// Pixel lanes evaluated together in the per-pixel loops (one AVX2 register of f32).
+const LANES: usize = 8;
+/// Tile buffers are padded so that a run of `LANES` pixels starting at any column of the last
+/// row stays in bounds; lanes beyond a splat's span are masked out and leave the pixels as
+/// they are.
+const PADDED: usize = TILE_PIXELS + LANES;
+
+/// Runs `f` compiled for AVX2 where the CPU has it (the lanes then map onto one register);
+/// both builds perform the same IEEE operations in the same order (no FMA contraction), so
+/// the results are bit-identical either way.
+macro_rules! dispatch_avx2 {
+    ($generic:ident, $avx2:ident, ($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        #[allow(clippy::too_many_arguments)]
+        fn $avx2($($arg: $ty),*) -> $ret {
+            $generic($($arg),*)
+        }
+    };
+}
+
+/// Composites one tile front to back: splats in depth order, each over the pixels of its box
+/// (row by row, the columns where its ellipse can reach α = 1/255, `LANES` pixels at a time),
+/// with per-pixel state in structure-of-arrays tile buffers. The lane loop is branch-free
+/// (masks and selects instead of `continue`) so that it vectorises; masked lanes add exact
+/// zeros and keep their state.
 #[allow(clippy::too_many_arguments)]
 fn raster_tile_forward(
+    sc: &TileScratch,
+    rules: &PixelRules,
+    origin: (usize, usize),
+    size: (usize, usize),
+    rgb: &mut [[f32; 3]],
+    t_out: &mut [f32],
+    last_out: &mut [u32],
+    depth_out: &mut [f32],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe {
+            raster_tile_forward_avx2(sc, rules, origin, size, rgb, t_out, last_out, depth_out)
+        };
+    }
+    raster_tile_forward_generic(sc, rules, origin, size, rgb, t_out, last_out, depth_out)
+}
+
+dispatch_avx2!(raster_tile_forward_generic, raster_tile_forward_avx2, (
+    sc: &TileScratch,
+    rules: &PixelRules,
+    origin: (usize, usize),
+    size: (usize, usize),
+    rgb: &mut [[f32; 3]],
+    t_out: &mut [f32],
+    last_out: &mut [u32],
+    depth_out: &mut [f32],
+) -> ());
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn raster_tile_forward_generic(
     sc: &TileScratch,
     rules: &PixelRules,
     origin: (usize, usize),
@@ -688,21 +748,22 @@ fn raster_tile_forward(
     last_out: &mut [u32],
     depth_out: &mut [f32],
 ) {
-    let mut t = [1.0f32; TILE_PIXELS];
-    let mut cr = [0.0f32; TILE_PIXELS];
-    let mut cg = [0.0f32; TILE_PIXELS];
-    let mut cb = [0.0f32; TILE_PIXELS];
-    let mut dz = [0.0f32; TILE_PIXELS];
-    let mut last = [0u32; TILE_PIXELS];
-    // Pixels beyond the image edge are never opened.
-    let mut done = [true; TILE_PIXELS];
+    let mut t = [1.0f32; PADDED];
+    let mut cr = [0.0f32; PADDED];
+    let mut cg = [0.0f32; PADDED];
+    let mut cb = [0.0f32; PADDED];
+    let mut dz = [0.0f32; PADDED];
+    let mut last = [0u32; PADDED];
+    // Pixels beyond the image edge are never opened (1 = done).
+    let mut done = [1u32; PADDED];
     let mut open = 0usize;
     for ly in 0..TILE.min(h - origin.1) {
         for lx in 0..TILE.min(w - origin.0) {
-            done[ly * TILE + lx] = false;
+            done[ly * TILE + lx] = 0;
             open += 1;
         }
     }
+    let lane_offset: [f32; LANES] = std::array::from_fn(|i| i as f32);
     let (amin, amax, tmin) = (rules.alpha_min, rules.alpha_max, rules.t_min);
     for j in 0..sc.x.len() {
         let [x0, x1, y0, y1] = sc.bx[j].map(usize::from);
@@ -713,33 +774,47 @@ fn raster_tile_forward(
         let id = j as u32 + 1;
         let px0 = mx - (origin.0 as f32 + 0.5);
         let power = sc.power[j];
-        let mut stopped = 0usize;
+        let mut stopped = 0u32;
         for ly in y0..y1 {
             let dy = my - ((origin.1 + ly) as f32 + 0.5);
             let row = ly * TILE;
             let (lx0, lx1) = row_span([ca, cbb, cc], power, dy, px0, x0, x1);
-            for lx in lx0..lx1 {
-                let k = row + lx;
-                let dx = px0 - lx as f32;
-                let sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cbb * dx * dy;
-                let alpha = (op * exp_neg(-sigma)).min(amax);
-                let tk = t[k];
-                let next_t = tk * (1.0 - alpha);
-                let valid = !done[k] & (sigma >= 0.0) & (alpha >= amin);
-                let stop = valid & (next_t <= tmin);
-                let draw = valid & !stop;
-                done[k] |= stop;
-                stopped += stop as usize;
-                let wgt = if draw { alpha * tk } else { 0.0 };
-                cr[k] += r * wgt;
-                cg[k] += g * wgt;
-                cb[k] += b * wgt;
-                dz[k] += z * wgt;
-                t[k] = if draw { next_t } else { tk };
-                last[k] = if draw { id } else { last[k] };
+            let mut start = lx0;
+            while start < lx1 {
+                let k0 = row + start;
+                let n_in = (lx1 - start) as u32;
+                let tv: &mut [f32; LANES] = (&mut t[k0..k0 + LANES]).try_into().unwrap();
+                let crv: &mut [f32; LANES] = (&mut cr[k0..k0 + LANES]).try_into().unwrap();
+                let cgv: &mut [f32; LANES] = (&mut cg[k0..k0 + LANES]).try_into().unwrap();
+                let cbv: &mut [f32; LANES] = (&mut cb[k0..k0 + LANES]).try_into().unwrap();
+                let dzv: &mut [f32; LANES] = (&mut dz[k0..k0 + LANES]).try_into().unwrap();
+                let lastv: &mut [u32; LANES] = (&mut last[k0..k0 + LANES]).try_into().unwrap();
+                let donev: &mut [u32; LANES] = (&mut done[k0..k0 + LANES]).try_into().unwrap();
+                let dx0 = px0 - start as f32;
+                for i in 0..LANES {
+                    let dx = dx0 - lane_offset[i];
+                    let sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cbb * dx * dy;
+                    let alpha = (op * exp_neg(-sigma)).min(amax);
+                    let tk = tv[i];
+                    let next_t = tk * (1.0 - alpha);
+                    let valid =
+                        ((i as u32) < n_in) & (donev[i] == 0) & (sigma >= 0.0) & (alpha >= amin);
+                    let stop = valid & (next_t <= tmin);
+                    let draw = valid & !stop;
+                    donev[i] |= stop as u32;
+                    stopped += stop as u32;
+                    let wgt = if draw { alpha * tk } else { 0.0 };
+                    crv[i] += r * wgt;
+                    cgv[i] += g * wgt;
+                    cbv[i] += b * wgt;
+                    dzv[i] += z * wgt;
+                    tv[i] = if draw { next_t } else { tk };
+                    lastv[i] = if draw { id } else { lastv[i] };
+                }
+                start += LANES;
             }
         }
-        open -= stopped;
+        open -= stopped as usize;
         if open == 0 {
             break;
         }
@@ -747,9 +822,9 @@ fn raster_tile_forward(
     for k in 0..TILE_PIXELS {
         rgb[k] = [cr[k], cg[k], cb[k]];
     }
-    t_out.copy_from_slice(&t);
-    last_out.copy_from_slice(&last);
-    depth_out.copy_from_slice(&dz);
+    t_out.copy_from_slice(&t[..TILE_PIXELS]);
+    last_out.copy_from_slice(&last[..TILE_PIXELS]);
+    depth_out.copy_from_slice(&dz[..TILE_PIXELS]);
 }
 
 /// Inputs of one tile's backward.
@@ -768,20 +843,51 @@ struct TileBackward<'a> {
 
 /// Walks a tile's list back to front, each splat over the pixels of its box for which it was
 /// composited (index below the pixel's last contributor), restoring the transmittance and the
-/// colour behind; writes each list entry's summed gradient into `grads` and returns the tile's
-/// background gradient.
+/// colour behind, `LANES` pixels at a time with masks (as in the forward); writes each list
+/// entry's summed gradient into `grads` (per-lane partial sums added in lane order, so the
+/// result is deterministic) and returns the tile's background gradient.
 fn raster_tile_backward(
+    sc: &TileScratch,
+    ctx: &TileBackward<'_>,
+    grads: &mut [SplatGrad],
+) -> [f64; 3] {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { raster_tile_backward_avx2(sc, ctx, grads) };
+    }
+    raster_tile_backward_generic(sc, ctx, grads)
+}
+
+dispatch_avx2!(raster_tile_backward_generic, raster_tile_backward_avx2, (
+    sc: &TileScratch,
+    ctx: &TileBackward<'_>,
+    grads: &mut [SplatGrad],
+) -> [f64; 3]);
+
+/// Sum of the lanes in lane order.
+#[inline(always)]
+fn lane_sum(v: &[f32; LANES]) -> f32 {
+    v.iter().fold(0.0, |acc, &x| acc + x)
+}
+
+#[inline(always)]
+fn raster_tile_backward_generic(
     sc: &TileScratch,
     ctx: &TileBackward<'_>,
     grads: &mut [SplatGrad],
 ) -> [f64; 3] {
     let rules = ctx.rules;
     let (ox, oy) = ctx.origin;
-    let mut t = [0.0f32; TILE_PIXELS];
-    let mut behind = [[0.0f32; 3]; TILE_PIXELS];
-    let mut vc = [[0.0f32; 3]; TILE_PIXELS];
+    let mut t = [0.0f32; PADDED];
+    // Colour composited behind each pixel so far, per channel.
+    let mut behind = [[0.0f32; PADDED]; 3];
+    // dL/dRGB per channel.
+    let mut vc = [[0.0f32; PADDED]; 3];
     // (d_alpha − d_rgb·bg) · T_final: the part of dL/dα_j common to every splat of a pixel.
-    let mut v_final = [0.0f32; TILE_PIXELS];
+    let mut v_final = [0.0f32; PADDED];
+    // Last contributor per pixel; 0 (nothing to undo) outside the image and in the padding.
+    let mut last = [0u32; PADDED];
     let mut v_bg = [0.0f64; 3];
     let mut max_last = 0u32;
     for ly in 0..TILE.min(ctx.h - oy) {
@@ -797,15 +903,19 @@ fn raster_tile_backward(
             let tf = ctx.t_final[k];
             for ch in 0..3 {
                 v_bg[ch] += (v[ch] * tf) as f64;
+                vc[ch][k] = v[ch];
             }
             let bg_dot = v[0] * ctx.bg[0] + v[1] * ctx.bg[1] + v[2] * ctx.bg[2];
-            vc[k] = v;
             v_final[k] = tf * (va - bg_dot);
             t[k] = tf;
+            last[k] = ctx.last[k];
             max_last = max_last.max(ctx.last[k]);
         }
     }
+    let lane_offset: [f32; LANES] = std::array::from_fn(|i| i as f32);
     let (amin, amax) = (rules.alpha_min, rules.alpha_max);
+    let [vr, vg, vb] = &vc;
+    let [br, bgr, bb] = &mut behind;
     for j in (0..max_last as usize).rev() {
         let [x0, x1, y0, y1] = sc.bx[j].map(usize::from);
         let (mx, my) = (sc.x[j], sc.y[j]);
@@ -813,47 +923,70 @@ fn raster_tile_backward(
         let col = sc.col[j];
         let px0 = mx - (ox as f32 + 0.5);
         let power = sc.power[j];
-        let mut gr = SplatGrad::default();
+        let jj = j as u32;
+        let mut g_col = [[0.0f32; LANES]; 3];
+        let mut g_conic = [[0.0f32; LANES]; 3];
+        let mut g_mean = [[0.0f32; LANES]; 2];
+        let mut g_op = [0.0f32; LANES];
         for ly in y0..y1 {
             let dy = my - ((oy + ly) as f32 + 0.5);
             let row = ly * TILE;
             let (lx0, lx1) = row_span([ca, cb, cc], power, dy, px0, x0, x1);
-            for lx in lx0..lx1 {
-                let k = row + lx;
-                let dx = px0 - lx as f32;
-                let sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
-                let gauss = exp_neg(-sigma);
-                let raw = op * gauss;
-                let alpha = raw.min(amax);
-                // Exactly the forward's test for "composited at this pixel".
-                let valid = ((j as u32) < ctx.last[k]) & (sigma >= 0.0) & (alpha >= amin);
-                if !valid {
-                    continue;
+            let mut start = lx0;
+            while start < lx1 {
+                let k0 = row + start;
+                let n_in = (lx1 - start) as u32;
+                let lane =
+                    |a: &[f32; PADDED]| -> [f32; LANES] { a[k0..k0 + LANES].try_into().unwrap() };
+                let (vr, vg, vb, vf) = (lane(vr), lane(vg), lane(vb), lane(&v_final));
+                let lastv: [u32; LANES] = last[k0..k0 + LANES].try_into().unwrap();
+                let tv: &mut [f32; LANES] = (&mut t[k0..k0 + LANES]).try_into().unwrap();
+                let brv: &mut [f32; LANES] = (&mut br[k0..k0 + LANES]).try_into().unwrap();
+                let bgv: &mut [f32; LANES] = (&mut bgr[k0..k0 + LANES]).try_into().unwrap();
+                let bbv: &mut [f32; LANES] = (&mut bb[k0..k0 + LANES]).try_into().unwrap();
+                let dx0 = px0 - start as f32;
+                for i in 0..LANES {
+                    let dx = dx0 - lane_offset[i];
+                    let sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
+                    let gauss = exp_neg(-sigma);
+                    let raw = op * gauss;
+                    let alpha = raw.min(amax);
+                    // Exactly the forward's test for "composited at this pixel".
+                    let valid =
+                        ((i as u32) < n_in) & (jj < lastv[i]) & (sigma >= 0.0) & (alpha >= amin);
+                    let ra = 1.0 / (1.0 - alpha);
+                    let tk = tv[i] * ra;
+                    tv[i] = if valid { tk } else { tv[i] };
+                    let wgt = if valid { alpha * tk } else { 0.0 };
+                    let mut v_alpha = vf[i] * ra;
+                    v_alpha += vr[i] * (col[0] * tk - brv[i] * ra);
+                    v_alpha += vg[i] * (col[1] * tk - bgv[i] * ra);
+                    v_alpha += vb[i] * (col[2] * tk - bbv[i] * ra);
+                    g_col[0][i] += wgt * vr[i];
+                    g_col[1][i] += wgt * vg[i];
+                    g_col[2][i] += wgt * vb[i];
+                    brv[i] += col[0] * wgt;
+                    bgv[i] += col[1] * wgt;
+                    bbv[i] += col[2] * wgt;
+                    let unclamped = valid & (raw <= amax);
+                    let v_sigma = if unclamped { -raw * v_alpha } else { 0.0 };
+                    let v_op = if unclamped { gauss * v_alpha } else { 0.0 };
+                    g_conic[0][i] += 0.5 * v_sigma * dx * dx;
+                    g_conic[1][i] += v_sigma * dx * dy;
+                    g_conic[2][i] += 0.5 * v_sigma * dy * dy;
+                    g_mean[0][i] += v_sigma * (ca * dx + cb * dy);
+                    g_mean[1][i] += v_sigma * (cb * dx + cc * dy);
+                    g_op[i] += v_op;
                 }
-                let ra = 1.0 / (1.0 - alpha);
-                let tk = t[k] * ra;
-                t[k] = tk;
-                let wgt = alpha * tk;
-                let v = vc[k];
-                let bh = &mut behind[k];
-                let mut v_alpha = v_final[k] * ra;
-                for ch in 0..3 {
-                    gr.color[ch] += wgt * v[ch];
-                    v_alpha += v[ch] * (col[ch] * tk - bh[ch] * ra);
-                    bh[ch] += col[ch] * wgt;
-                }
-                if raw <= amax {
-                    let v_sigma = -raw * v_alpha;
-                    gr.conic[0] += 0.5 * v_sigma * dx * dx;
-                    gr.conic[1] += v_sigma * dx * dy;
-                    gr.conic[2] += 0.5 * v_sigma * dy * dy;
-                    gr.mean2d[0] += v_sigma * (ca * dx + cb * dy);
-                    gr.mean2d[1] += v_sigma * (cb * dx + cc * dy);
-                    gr.opacity += gauss * v_alpha;
-                }
+                start += LANES;
             }
         }
-        grads[j] = gr;
+        grads[j] = SplatGrad {
+            mean2d: g_mean.each_ref().map(lane_sum),
+            conic: g_conic.each_ref().map(lane_sum),
+            opacity: lane_sum(&g_op),
+            color: g_col.each_ref().map(lane_sum),
+        };
     }
     v_bg
 }
