@@ -137,6 +137,10 @@ pub struct InitConfig {
     pub knn: usize,
     /// Number of points for random initialisation (no SfM points).
     pub random_points: usize,
+    /// An SfM cloud sparser than this is topped up with random points inside the camera
+    /// frustums, at the depths its points occupy (blurry images give sparse clouds, and MCMC
+    /// grows a set by only 5 % per refinement).
+    pub min_points: usize,
     /// Depth range (in units of the scene scale) of random points inside the camera frustums.
     pub random_near: f32,
     pub random_far: f32,
@@ -149,6 +153,7 @@ impl Default for InitConfig {
             scale_factor: 0.1,
             knn: 3,
             random_points: 100_000,
+            min_points: 10_000,
             random_near: 0.1,
             random_far: 3.0,
         }

@@ -81,6 +81,28 @@ fn load_model(dir: &Path) -> Result<SparseModel, TrainError> {
         .map_err(|e| TrainError::Input(format!("reading COLMAP model {}: {e}", dir.display())))
 }
 
+/// The 5th–95th percentile depth range (widened by 20 %) of `points` seen by `cams`, or `None`
+/// when no point lies in front of a camera.
+fn depth_range(points: &[[f32; 3]], cams: &[gems_splat::Camera]) -> Option<(f32, f32)> {
+    let mut depths: Vec<f32> = cams
+        .iter()
+        .flat_map(|c| {
+            points.iter().map(move |p| {
+                let r = &c.rotation[2];
+                r[0] * p[0] + r[1] * p[1] + r[2] * p[2] + c.translation[2]
+            })
+        })
+        .filter(|z| z.is_finite() && *z > 0.0)
+        .collect();
+    if depths.is_empty() {
+        return None;
+    }
+    depths.sort_by(f32::total_cmp);
+    let at = |q: f64| depths[((depths.len() - 1) as f64 * q).round() as usize];
+    let (near, far) = (0.8 * at(0.05), 1.2 * at(0.95));
+    (far > near && near > 0.0).then_some((near, far))
+}
+
 /// Builds the training input of `scene` for `mode`.
 pub fn prepare_input(
     scene: &Scene,
@@ -248,22 +270,40 @@ pub fn prepare_input(
         .fold(0.0, f64::max);
     let scene_scale = (cfg.normalize.scene_scale_margin * max_dist).max(1e-6) as f32;
 
+    let cams: Vec<_> = views
+        .iter()
+        .map(|v| camera_from_c2w(&v.c2w_init, &v.intrinsics))
+        .collect();
     let (points, colors) = match model.as_ref().map(read_points) {
         Some((p, c)) if p.len() >= 2 => {
-            let p = p
+            let mut p: Vec<[f32; 3]> = p
                 .iter()
                 .map(|x| {
                     let q = norm.apply_point(&Vector3::new(x[0] as f64, x[1] as f64, x[2] as f64));
                     [q.x as f32, q.y as f32, q.z as f32]
                 })
                 .collect();
+            let mut c = c;
+            if p.len() < cfg.init.min_points {
+                let (near, far) = depth_range(&p, &cams).unwrap_or((
+                    cfg.init.random_near * scene_scale,
+                    cfg.init.random_far * scene_scale,
+                ));
+                let extra = cfg.init.min_points - p.len();
+                tracing::info!(
+                    sfm_points = p.len(),
+                    extra,
+                    near,
+                    far,
+                    "sparse SfM cloud: adding random points inside the camera frustums"
+                );
+                let (rp, rc) = random_in_frustums(&cams, extra, near, far, &mut rng)?;
+                p.extend(rp);
+                c.extend(rc);
+            }
             (p, c)
         }
         _ => {
-            let cams: Vec<_> = views
-                .iter()
-                .map(|v| camera_from_c2w(&v.c2w_init, &v.intrinsics))
-                .collect();
             let (near, far) = (
                 cfg.init.random_near * scene_scale,
                 cfg.init.random_far * scene_scale,

@@ -1,6 +1,7 @@
 //! `gems demo`: the whole pipeline on a scene it makes itself — no downloads, no weights.
 //!
-//! 1. `gems synth` (small preset): an extreme-blur procedural scene with ground truth;
+//! 1. `gems synth` (small preset with 24 views, so neighbouring views overlap enough for SfM
+//!    under 30 px of blur): an extreme-blur procedural scene with ground truth;
 //! 2. the built-in blur-robust SfM on the blurry images (poses, focal, points) — falling back to
 //!    noisy ground-truth poses, labelled as such, only if SfM fails outright;
 //! 3. GeMS training (blur model, Bézier trajectories, MCMC) with a short schedule;
@@ -60,6 +61,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let synth = SynthConfig {
         seed: args.seed,
+        views: 24,
         ..SynthConfig::small()
     };
     tracing::info!(
