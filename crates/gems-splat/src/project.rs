@@ -98,8 +98,6 @@ pub(crate) struct Proj {
     /// rounding), capped by the radius. Outside it a pixel skips this Gaussian anyway, so the
     /// fast path may ignore it there without changing any output.
     pub extent: [f64; 2],
-    /// The same region as the ellipse `σ ≤ power` (infinite when every σ may draw).
-    pub power: f64,
 }
 
 struct Geometry {
@@ -201,11 +199,9 @@ pub(crate) fn project(
     let color = sh::color(g.sh_degree, &g.sh[i], dir);
     let opacity = prep.opacity * comp;
     let mut extent = [rx, ry];
-    let mut power = f64::INFINITY;
     if s.alpha_min > 0.0 {
         let thr = (opacity / s.alpha_min as f64).ln() * 1.01 + 1e-3;
         let e = [(2.0 * thr * a).sqrt(), (2.0 * thr * c).sqrt()];
-        power = thr.max(0.0);
         for k in 0..2 {
             // thr < 0 (NaN root) means α never reaches alpha_min: nothing to draw.
             extent[k] = if thr > 0.0 { e[k].min(extent[k]) } else { 0.0 };
@@ -221,7 +217,6 @@ pub(crate) fn project(
         opacity,
         color,
         extent,
-        power,
     })
 }
 

@@ -32,8 +32,6 @@ struct Splat {
     depth: f32,
     /// Half extent in pixels of the region where the Gaussian can be drawn.
     extent: [f32; 2],
-    /// σ bound of the drawable ellipse (see `Proj::power`).
-    power: f32,
 }
 
 /// Per-intersection (or per-splat) screen-space gradient.
@@ -92,7 +90,6 @@ struct TileScratch {
     z: Vec<f32>,
     /// Tile-local pixel box `[x0, x1) × [y0, y1)` the splat can draw into.
     bx: Vec<[u8; 4]>,
-    power: Vec<f32>,
 }
 
 impl TileScratch {
@@ -107,7 +104,6 @@ impl TileScratch {
         self.col.clear();
         self.z.clear();
         self.bx.clear();
-        self.power.clear();
         for s in splats {
             self.x.push(s.x);
             self.y.push(s.y);
@@ -128,39 +124,7 @@ impl TileScratch {
             let (x0, x1) = local(s.x, s.extent[0], origin.0, size.0);
             let (y0, y1) = local(s.y, s.extent[1], origin.1, size.1);
             self.bx.push([x0, x1, y0, y1]);
-            self.power.push(s.power);
         }
-    }
-}
-
-/// Tile-local columns `[lo, hi)` within `[x0, x1)` of the row at offset `dy` (mean − pixel centre)
-/// where the ellipse `½(a dx² + c dy²) + b dx dy ≤ power` can contain a pixel centre; `px0` is
-/// the mean minus the centre of column 0. `power` carries a margin, so no drawable pixel is
-/// dropped; NaN bounds fall back to the whole box.
-#[inline(always)]
-fn row_span(
-    conic: [f32; 3],
-    power: f32,
-    dy: f32,
-    px0: f32,
-    x0: usize,
-    x1: usize,
-) -> (usize, usize) {
-    let [a, b, c] = conic;
-    let disc = dy * dy * (b * b - a * c) + 2.0 * a * power;
-    if disc < 0.0 {
-        return (0, 0);
-    }
-    let sq = disc.sqrt();
-    let dx_lo = (-b * dy - sq) / a;
-    let dx_hi = (-b * dy + sq) / a;
-    // Column lx has dx = px0 − lx.
-    let lo = (px0 - dx_hi).ceil().max(x0 as f32);
-    let hi = ((px0 - dx_lo).floor() + 1.0).min(x1 as f32);
-    if hi > lo {
-        (lo as usize, hi as usize)
-    } else {
-        (0, 0)
     }
 }
 
@@ -271,7 +235,6 @@ impl Renderer {
                         color: p.color.map(|v| v as f32),
                         depth: p.depth as f32,
                         extent: p.extent.map(|v| v as f32),
-                        power: p.power as f32,
                     };
                 }
             });
@@ -700,8 +663,9 @@ macro_rules! dispatch_avx2 {
 }
 
 /// Composites one tile front to back: splats in depth order, each over the pixels of its box
-/// (row by row, the columns where its ellipse can reach α = 1/255, `LANES` pixels at a time),
-/// with per-pixel state in structure-of-arrays tile buffers. The lane loop is branch-free
+/// (the bounding box of its α ≥ 1/255 ellipse; row by row, `LANES` pixels at a time: a typical
+/// box row fits in one step, so trimming rows to the ellipse costs more than it saves), with
+/// per-pixel state in structure-of-arrays tile buffers. The lane loop is branch-free
 /// (masks and selects instead of `continue`) so that it vectorises; masked lanes add exact
 /// zeros and keep their state.
 #[allow(clippy::too_many_arguments)]
@@ -773,16 +737,14 @@ fn raster_tile_forward_generic(
         let z = sc.z[j];
         let id = j as u32 + 1;
         let px0 = mx - (origin.0 as f32 + 0.5);
-        let power = sc.power[j];
         let mut stopped = 0u32;
         for ly in y0..y1 {
             let dy = my - ((origin.1 + ly) as f32 + 0.5);
             let row = ly * TILE;
-            let (lx0, lx1) = row_span([ca, cbb, cc], power, dy, px0, x0, x1);
-            let mut start = lx0;
-            while start < lx1 {
+            let mut start = x0;
+            while start < x1 {
                 let k0 = row + start;
-                let n_in = (lx1 - start) as u32;
+                let n_in = (x1 - start) as u32;
                 let tv: &mut [f32; LANES] = (&mut t[k0..k0 + LANES]).try_into().unwrap();
                 let crv: &mut [f32; LANES] = (&mut cr[k0..k0 + LANES]).try_into().unwrap();
                 let cgv: &mut [f32; LANES] = (&mut cg[k0..k0 + LANES]).try_into().unwrap();
@@ -922,7 +884,6 @@ fn raster_tile_backward_generic(
         let (ca, cb, cc, op) = (sc.a[j], sc.b[j], sc.c[j], sc.o[j]);
         let col = sc.col[j];
         let px0 = mx - (ox as f32 + 0.5);
-        let power = sc.power[j];
         let jj = j as u32;
         let mut g_col = [[0.0f32; LANES]; 3];
         let mut g_conic = [[0.0f32; LANES]; 3];
@@ -931,11 +892,10 @@ fn raster_tile_backward_generic(
         for ly in y0..y1 {
             let dy = my - ((oy + ly) as f32 + 0.5);
             let row = ly * TILE;
-            let (lx0, lx1) = row_span([ca, cb, cc], power, dy, px0, x0, x1);
-            let mut start = lx0;
-            while start < lx1 {
+            let mut start = x0;
+            while start < x1 {
                 let k0 = row + start;
-                let n_in = (lx1 - start) as u32;
+                let n_in = (x1 - start) as u32;
                 let lane =
                     |a: &[f32; PADDED]| -> [f32; LANES] { a[k0..k0 + LANES].try_into().unwrap() };
                 let (vr, vg, vb, vf) = (lane(vr), lane(vg), lane(vb), lane(&v_final));
@@ -1016,35 +976,5 @@ mod tests {
         assert_eq!(pixel_span(-5.0, 2.0, 100), None);
         assert_eq!(pixel_span(1.0, 100.0, 10), Some((0, 9)));
         assert_eq!(pixel_span(f32::NAN, 1.0, 10), None);
-    }
-
-    #[test]
-    fn row_span_contains_every_pixel_inside_the_ellipse() {
-        // Deterministic pseudo-random ellipses; brute force over a 16-wide row.
-        let mut state = 12345u32;
-        let mut next = || {
-            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (state >> 8) as f32 / (1u32 << 24) as f32
-        };
-        for _ in 0..2000 {
-            let (sx, sy, rho) = (0.3 + 6.0 * next(), 0.3 + 6.0 * next(), 1.8 * next() - 0.9);
-            let (xx, yy, xy) = (sx * sx + 0.3, sy * sy + 0.3, rho * sx * sy);
-            let det = xx * yy - xy * xy;
-            let conic = [yy / det, -xy / det, xx / det];
-            let power = 5.0 * next();
-            let px0 = 20.0 * next() - 2.0;
-            let dy = 12.0 * next() - 6.0;
-            let (lo, hi) = row_span(conic, power * 1.01 + 1e-3, dy, px0, 0, 16);
-            for lx in 0..16 {
-                let dx = px0 - lx as f32;
-                let sigma = 0.5 * (conic[0] * dx * dx + conic[2] * dy * dy) + conic[1] * dx * dy;
-                if sigma <= power {
-                    assert!(
-                        lo <= lx && lx < hi,
-                        "column {lx} (σ {sigma} ≤ {power}) outside {lo}..{hi}"
-                    );
-                }
-            }
-        }
     }
 }
