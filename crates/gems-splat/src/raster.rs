@@ -30,8 +30,9 @@ struct Splat {
     opacity: f32,
     color: [f32; 3],
     depth: f32,
-    /// Half extent in pixels of the region where the Gaussian can be drawn.
-    extent: [f32; 2],
+    /// Inclusive pixel range `[x0, x1] × [y0, y1]` where the Gaussian can be drawn (within
+    /// the image); `x0 > x1` when there is none.
+    pbox: [i32; 4],
 }
 
 /// Per-intersection (or per-splat) screen-space gradient.
@@ -93,8 +94,8 @@ struct TileScratch {
 }
 
 impl TileScratch {
-    /// Copies the tile's splats; `origin` is the tile's first pixel, `size` the image size.
-    fn load(&mut self, splats: &[Splat], origin: (usize, usize), size: (usize, usize)) {
+    /// Copies the tile's splats; `origin` is the tile's first pixel.
+    fn load(&mut self, splats: &[Splat], origin: (usize, usize)) {
         self.x.clear();
         self.y.clear();
         self.a.clear();
@@ -113,16 +114,18 @@ impl TileScratch {
             self.o.push(s.opacity);
             self.col.push(s.color);
             self.z.push(s.depth);
-            let local = |m: f32, e: f32, o: usize, n: usize| match pixel_span(m, e, n) {
-                Some((lo, hi)) if hi >= o && lo < o + TILE => {
-                    let lo = lo.max(o) - o;
-                    let hi = hi.min(o + TILE - 1) - o + 1;
-                    (lo as u8, hi as u8)
+            let local = |lo: i32, hi: i32, o: usize| {
+                let o = o as i32;
+                let (lo, hi) = (lo.max(o), hi.min(o + TILE as i32 - 1));
+                if lo <= hi {
+                    ((lo - o) as u8, (hi - o + 1) as u8)
+                } else {
+                    (0, 0)
                 }
-                _ => (0, 0),
             };
-            let (x0, x1) = local(s.x, s.extent[0], origin.0, size.0);
-            let (y0, y1) = local(s.y, s.extent[1], origin.1, size.1);
+            let [px0, px1, py0, py1] = s.pbox;
+            let (x0, x1) = local(px0, px1, origin.0);
+            let (y0, y1) = local(py0, py1, origin.1);
             self.bx.push([x0, x1, y0, y1]);
         }
     }
@@ -234,7 +237,14 @@ impl Renderer {
                         opacity: p.opacity as f32,
                         color: p.color.map(|v| v as f32),
                         depth: p.depth as f32,
-                        extent: p.extent.map(|v| v as f32),
+                        pbox: [0; 4],
+                    };
+                    sp.pbox = match (
+                        pixel_span(sp.x, p.extent[0] as f32, w),
+                        pixel_span(sp.y, p.extent[1] as f32, h),
+                    ) {
+                        (Some((x0, x1)), Some((y0, y1))) => [x0, x1, y0, y1].map(|v| v as i32),
+                        _ => [1, 0, 1, 0],
                     };
                 }
             });
@@ -285,7 +295,7 @@ impl Renderer {
                     }
                     let (tx, ty) = (tile % tiles_x, tile / tiles_x);
                     let origin = (tx * TILE, ty * TILE);
-                    scratch.load(&b.packed[range.clone()], origin, (w, h));
+                    scratch.load(&b.packed[range.clone()], origin);
                     raster_tile_forward(scratch, &rules, origin, (w, h), rgb, t, last, depth);
                 },
             );
@@ -444,7 +454,10 @@ impl Renderer {
                 let b = &bins[c];
                 let range = b.offsets[tile] as usize..b.offsets[tile + 1] as usize;
                 let origin = (tx * TILE, ty * TILE);
-                scratch.load(&b.packed[range.clone()], origin, (w, h));
+                // Entries behind every pixel's last contributor are never revisited.
+                let last = &tile_last[px..px + TILE_PIXELS];
+                let used = last.iter().copied().max().unwrap_or(0) as usize;
+                scratch.load(&b.packed[range.start..range.start + used], origin);
                 let img = c * h * w;
                 let ctx = TileBackward {
                     rules: &rules,
@@ -452,7 +465,7 @@ impl Renderer {
                     w,
                     h,
                     t_final: &tile_t[px..px + TILE_PIXELS],
-                    last: &tile_last[px..px + TILE_PIXELS],
+                    last,
                     d_rgb: &d_rgb[img * 3..(img + h * w) * 3],
                     d_alpha: d_alpha.map(|da| &da[img..img + h * w]),
                     bg: backgrounds[c],
@@ -570,17 +583,12 @@ fn bin_camera(
     bins.offsets.resize(tiles + 1, 0);
     bins.rects.clear();
     bins.rects.extend(bins.splats.iter().map(|sp| {
-        match (
-            pixel_span(sp.x, sp.extent[0], width),
-            pixel_span(sp.y, sp.extent[1], height),
-        ) {
-            (Some((x0, x1)), Some((y0, y1))) => [
-                (x0 / TILE) as u16,
-                (x1 / TILE + 1) as u16,
-                (y0 / TILE) as u16,
-                (y1 / TILE + 1) as u16,
-            ],
-            _ => [0; 4],
+        let [x0, x1, y0, y1] = sp.pbox;
+        if x0 <= x1 && y0 <= y1 {
+            let tile = |v: i32| (v as usize / TILE) as u16;
+            [tile(x0), tile(x1) + 1, tile(y0), tile(y1) + 1]
+        } else {
+            [0; 4]
         }
     }));
     for r in &bins.rects {
