@@ -656,15 +656,15 @@ const LANES: usize = 8;
 /// they are.
 const PADDED: usize = TILE_PIXELS + LANES;
 
-/// Runs `f` compiled for AVX2 where the CPU has it (the lanes then map onto one register);
-/// both builds perform the same IEEE operations in the same order (no FMA contraction), so
-/// the results are bit-identical either way.
-macro_rules! dispatch_avx2 {
-    ($generic:ident, $avx2:ident, ($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty) => {
+/// Defines `$fast` as `$generic` compiled with the given target features. The lanes map onto
+/// one AVX2 register; all builds perform the same IEEE operations in the same order (Rust
+/// never contracts to FMA), so the results are bit-identical whichever build the CPU runs.
+macro_rules! multiversion {
+    ($features:literal, $generic:ident, $fast:ident, ($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty) => {
         #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
+        #[target_feature(enable = $features)]
         #[allow(clippy::too_many_arguments)]
-        fn $avx2($($arg: $ty),*) -> $ret {
+        fn $fast($($arg: $ty),*) -> $ret {
             $generic($($arg),*)
         }
     };
@@ -697,7 +697,7 @@ fn raster_tile_forward(
     raster_tile_forward_generic(sc, rules, origin, size, rgb, t_out, last_out, depth_out)
 }
 
-dispatch_avx2!(raster_tile_forward_generic, raster_tile_forward_avx2, (
+multiversion!("avx2", raster_tile_forward_generic, raster_tile_forward_avx2, (
     sc: &TileScratch,
     rules: &PixelRules,
     origin: (usize, usize),
@@ -822,14 +822,30 @@ fn raster_tile_backward(
     grads: &mut [SplatGrad],
 ) -> [f64; 3] {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { raster_tile_backward_avx2(sc, ctx, grads) };
+    {
+        use std::arch::is_x86_feature_detected as has;
+        if has!("avx512f") && has!("avx512vl") {
+            // SAFETY: the CPU supports AVX-512 F and VL (checked just above).
+            return unsafe { raster_tile_backward_avx512(sc, ctx, grads) };
+        }
+        if has!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            return unsafe { raster_tile_backward_avx2(sc, ctx, grads) };
+        }
     }
     raster_tile_backward_generic(sc, ctx, grads)
 }
 
-dispatch_avx2!(raster_tile_backward_generic, raster_tile_backward_avx2, (
+multiversion!("avx2", raster_tile_backward_generic, raster_tile_backward_avx2, (
+    sc: &TileScratch,
+    ctx: &TileBackward<'_>,
+    grads: &mut [SplatGrad],
+) -> [f64; 3]);
+
+// Same 8-lane code with AVX-512 F+VL enabled: 32 vector registers and mask registers remove
+// the spills of the backward's many accumulators (about 10% faster here; the forward, with
+// fewer live values, runs slower this way and stays on AVX2).
+multiversion!("avx2,avx512f,avx512vl", raster_tile_backward_generic, raster_tile_backward_avx512, (
     sc: &TileScratch,
     ctx: &TileBackward<'_>,
     grads: &mut [SplatGrad],
