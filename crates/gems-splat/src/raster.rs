@@ -993,6 +993,115 @@ mod tests {
         assert!(exp_neg(-200.0) > 0.0 && exp_neg(-200.0) < 1e-37);
     }
 
+    /// Random splats of one tile (partly outside a 40×40 image) in depth order, with their
+    /// drawable pixel boxes, loaded as the renderer loads them.
+    fn random_tile(seed: u32, count: usize) -> (TileScratch, (usize, usize), (usize, usize)) {
+        let mut state = seed;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let (origin, size) = ((32, 32), (40, 40));
+        let splats: Vec<Splat> = (0..count)
+            .map(|k| {
+                let (sx, sy, rho) = (0.4 + 4.0 * next(), 0.4 + 4.0 * next(), 1.6 * next() - 0.8);
+                let (xx, yy, xy) = (sx * sx + 0.3, sy * sy + 0.3, rho * sx * sy);
+                let det = xx * yy - xy * xy;
+                let (x, y) = (26.0 + 20.0 * next(), 26.0 + 20.0 * next());
+                let (ex, ey) = (3.33 * xx.sqrt(), 3.33 * yy.sqrt());
+                let pbox = match (pixel_span(x, ex, size.0), pixel_span(y, ey, size.1)) {
+                    (Some((x0, x1)), Some((y0, y1))) => [x0, x1, y0, y1].map(|v| v as i32),
+                    _ => [1, 0, 1, 0],
+                };
+                Splat {
+                    x,
+                    y,
+                    conic: [yy / det, -xy / det, xx / det],
+                    opacity: 0.02 + 0.97 * next(),
+                    color: [next(), next(), next()],
+                    depth: 1.0 + k as f32 * 0.01,
+                    pbox,
+                }
+            })
+            .collect();
+        let mut sc = TileScratch::default();
+        sc.load(&splats, origin);
+        (sc, origin, size)
+    }
+
+    /// The portable build of the pixel loops must give the same bits as the SIMD builds the
+    /// CPU dispatches to, so that results do not depend on the machine.
+    #[test]
+    fn simd_and_portable_pixel_loops_agree_bit_for_bit() {
+        let rules = PixelRules {
+            alpha_min: 1.0 / 255.0,
+            alpha_max: 0.999,
+            t_min: 1e-4,
+        };
+        for (seed, count) in [(1, 5), (2, 60), (3, 400)] {
+            let (sc, origin, size) = random_tile(seed, count);
+            let forward = |f: &dyn Fn(&mut [[f32; 3]], &mut [f32], &mut [u32], &mut [f32])| {
+                let mut rgb = vec![[0.0f32; 3]; TILE_PIXELS];
+                let (mut t, mut last, mut depth) = (
+                    vec![0.0f32; TILE_PIXELS],
+                    vec![0u32; TILE_PIXELS],
+                    vec![0.0f32; TILE_PIXELS],
+                );
+                f(&mut rgb, &mut t, &mut last, &mut depth);
+                (rgb, t, last, depth)
+            };
+            let fast = forward(&|rgb, t, last, depth| {
+                raster_tile_forward(&sc, &rules, origin, size, rgb, t, last, depth)
+            });
+            let portable = forward(&|rgb, t, last, depth| {
+                raster_tile_forward_generic(&sc, &rules, origin, size, rgb, t, last, depth)
+            });
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(fast.0.as_flattened()), bits(portable.0.as_flattened()));
+            assert_eq!(bits(&fast.1), bits(&portable.1));
+            assert_eq!(fast.2, portable.2);
+            assert_eq!(bits(&fast.3), bits(&portable.3));
+            assert!(fast.2.iter().any(|&l| l > 0), "nothing drawn");
+
+            let d_rgb: Vec<f32> = (0..size.0 * size.1 * 3)
+                .map(|k| ((k * 7919) % 200) as f32 / 100.0 - 1.0)
+                .collect();
+            let d_alpha: Vec<f32> = (0..size.0 * size.1)
+                .map(|k| ((k * 104_729) % 200) as f32 / 100.0 - 1.0)
+                .collect();
+            let ctx = TileBackward {
+                rules: &rules,
+                origin,
+                w: size.0,
+                h: size.1,
+                t_final: &fast.1,
+                last: &fast.2,
+                d_rgb: &d_rgb,
+                d_alpha: Some(&d_alpha),
+                bg: [0.1, 0.2, 0.3],
+            };
+            let mut g_fast = vec![SplatGrad::default(); count];
+            let mut g_portable = vec![SplatGrad::default(); count];
+            let bg_fast = raster_tile_backward(&sc, &ctx, &mut g_fast);
+            let bg_portable = raster_tile_backward_generic(&sc, &ctx, &mut g_portable);
+            assert_eq!(bg_fast.map(f64::to_bits), bg_portable.map(f64::to_bits));
+            let flat = |g: &[SplatGrad]| {
+                g.iter()
+                    .flat_map(|v| {
+                        v.mean2d
+                            .into_iter()
+                            .chain(v.conic)
+                            .chain([v.opacity])
+                            .chain(v.color)
+                    })
+                    .map(f32::to_bits)
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(flat(&g_fast), flat(&g_portable));
+            assert!(g_fast.iter().any(|v| v.opacity != 0.0), "no gradient");
+        }
+    }
+
     #[test]
     fn pixel_span_covers_exactly_the_centres_within_the_extent() {
         // Centres at x + 0.5: mean 10.2, extent 2 covers centres 8.5..=11.5 → pixels 8..=11.
