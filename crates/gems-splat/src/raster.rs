@@ -1029,6 +1029,8 @@ mod tests {
         (sc, origin, size)
     }
 
+    type TileForwardFn<'a> = dyn Fn(&mut [[f32; 3]], &mut [f32], &mut [u32], &mut [f32]) + 'a;
+
     /// The portable build of the pixel loops must give the same bits as the SIMD builds the
     /// CPU dispatches to, so that results do not depend on the machine.
     #[test]
@@ -1040,7 +1042,7 @@ mod tests {
         };
         for (seed, count) in [(1, 5), (2, 60), (3, 400)] {
             let (sc, origin, size) = random_tile(seed, count);
-            let forward = |f: &dyn Fn(&mut [[f32; 3]], &mut [f32], &mut [u32], &mut [f32])| {
+            let forward = |f: &TileForwardFn| {
                 let mut rgb = vec![[0.0f32; 3]; TILE_PIXELS];
                 let (mut t, mut last, mut depth) = (
                     vec![0.0f32; TILE_PIXELS],
