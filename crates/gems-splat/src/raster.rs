@@ -745,7 +745,8 @@ fn raster_tile_forward_generic(
         let z = sc.z[j];
         let id = j as u32 + 1;
         let px0 = mx - (origin.0 as f32 + 0.5);
-        let mut stopped = 0u32;
+        // Per lane, so that the count stays a vector add.
+        let mut stopped = [0u32; LANES];
         for ly in y0..y1 {
             let dy = my - ((origin.1 + ly) as f32 + 0.5);
             let row = ly * TILE;
@@ -772,7 +773,7 @@ fn raster_tile_forward_generic(
                     let stop = valid & (next_t <= tmin);
                     let draw = valid & !stop;
                     donev[i] |= stop as u32;
-                    stopped += stop as u32;
+                    stopped[i] += stop as u32;
                     let wgt = if draw { alpha * tk } else { 0.0 };
                     crv[i] += r * wgt;
                     cgv[i] += g * wgt;
@@ -784,7 +785,7 @@ fn raster_tile_forward_generic(
                 start += LANES;
             }
         }
-        open -= stopped as usize;
+        open -= stopped.iter().sum::<u32>() as usize;
         if open == 0 {
             break;
         }
