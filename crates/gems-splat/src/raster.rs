@@ -214,10 +214,8 @@ impl Renderer {
             .for_each(|(i, p)| *p = project::prepare(g, i));
 
         // Projection of every (camera, Gaussian).
-        self.splats.clear();
-        self.splats.resize(nc * n, Splat::default());
-        self.radii.clear();
-        self.radii.resize(nc * n, [0, 0]);
+        refill(&mut self.splats, nc * n, Splat::default());
+        refill(&mut self.radii, nc * n, [0, 0]);
         let preps = &self.preps;
         self.splats
             .par_iter_mut()
@@ -262,14 +260,10 @@ impl Renderer {
 
         // Rasterise every (camera, tile).
         let total_pixels = nc * tiles * TILE_PIXELS;
-        self.tile_rgb.clear();
-        self.tile_rgb.resize(total_pixels, [0.0; 3]);
-        self.tile_t.clear();
-        self.tile_t.resize(total_pixels, 1.0);
-        self.tile_last.clear();
-        self.tile_last.resize(total_pixels, 0);
-        self.tile_depth.clear();
-        self.tile_depth.resize(total_pixels, 0.0);
+        refill(&mut self.tile_rgb, total_pixels, [0.0; 3]);
+        refill(&mut self.tile_t, total_pixels, 1.0);
+        refill(&mut self.tile_last, total_pixels, 0);
+        refill(&mut self.tile_depth, total_pixels, 0.0);
         let rules = PixelRules {
             alpha_min: s.alpha_min,
             alpha_max: s.alpha_max,
@@ -427,8 +421,7 @@ impl Renderer {
             })
             .collect();
         let total_isect = self.bins.iter().map(|b| b.ids.len()).sum::<usize>();
-        self.isect_grads.clear();
-        self.isect_grads.resize(total_isect, SplatGrad::default());
+        refill(&mut self.isect_grads, total_isect, SplatGrad::default());
         let mut tile_slices: Vec<&mut [SplatGrad]> = Vec::with_capacity(nc * tiles);
         let mut rest: &mut [SplatGrad] = &mut self.isect_grads;
         for b in &self.bins {
@@ -474,8 +467,7 @@ impl Renderer {
             });
 
         // Per camera: sum the intersections of each Gaussian in list order.
-        self.splat_grads.clear();
-        self.splat_grads.resize(nc * n, SplatGrad::default());
+        refill(&mut self.splat_grads, nc * n, SplatGrad::default());
         let isect_grads = &self.isect_grads;
         self.splat_grads
             .par_chunks_mut(n.max(1))
@@ -549,6 +541,16 @@ impl Renderer {
         out.cam_translation = cam_grads.iter().map(|cg| cg.t.map(|v| v as f32)).collect();
         Ok(out)
     }
+}
+
+/// Sets `v` to `len` copies of `value`, filling in parallel: these buffers are tens of MB, and a
+/// serial fill would idle the other threads.
+fn refill<T: Copy + Send + Sync>(v: &mut Vec<T>, len: usize, value: T) {
+    v.truncate(len);
+    v.par_iter_mut()
+        .with_min_len(1 << 14)
+        .for_each(|x| *x = value);
+    v.resize(len, value);
 }
 
 /// Sorts the drawable Gaussians of one camera by depth, stores them compactly in that order and
