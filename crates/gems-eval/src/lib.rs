@@ -42,7 +42,7 @@ pub use refine::{PoseRefineConfig, Refined, refine_pose};
 pub use report::{GridRow, ReportInput, write_report};
 pub use trainer_eval::{
     EvalData, Evaluation, HeldOutView, eval_data_from_scene, evaluate_output,
-    evaluate_output_with_progress, evaluation_units, open_scene_for, report_input,
+    evaluate_output_with_progress, evaluation_units, open_scene_for, report_input, write_renders,
     write_trajectories,
 };
 

@@ -260,17 +260,35 @@ pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalD
         data.train_gt.push(gt);
         data.train_blurry.push(blurry);
     }
+    let pose_model = match &output.pose_model {
+        Some(dir) => Some(gems_data::colmap::read_model(dir)?),
+        None => None,
+    };
     for s in scene.views.iter().filter(|s| s.split == Split::NovelView) {
         let Some(gt_path) = &s.sharp_gt else { continue };
-        // The scene's pose source (SfM); without one, the ground truth is the only pose there
-        // is (the result was then trained from ground-truth poses as well).
-        let Some(pose) = s.pose.or(s.gt_pose) else {
-            tracing::warn!(view = %s.name, "held-out view has no pose; not evaluated");
+        // Poses of held-out views come from where the training poses came from: the model the
+        // result was initialised from, or else the scene's pose source; without either, the
+        // ground truth is the only pose there is (the result was then trained from it too).
+        let (pose, model_k) = match &pose_model {
+            Some(m) => match m.image_by_name(&s.name) {
+                Some(img) => {
+                    let k = m
+                        .camera(img.camera_id)
+                        .and_then(|c| c.intrinsics().ok())
+                        .map(|k| k.resized(s.width, s.height));
+                    (Some(img.pose()), k)
+                }
+                None => (None, None),
+            },
+            None => (s.pose.or(s.gt_pose), None),
+        };
+        let Some(pose) = pose else {
+            tracing::warn!(view = %s.name, "held-out view has no initial pose; not evaluated");
             continue;
         };
         // Without an SfM model the scene knows no intrinsics; the datasets use one camera, so
         // take the trained views' camera at this image size.
-        let k = match s.intrinsics {
+        let k = match model_k.or(s.intrinsics) {
             Some(k) => Intrinsics {
                 fx: k.fx as f32,
                 fy: k.fy as f32,
@@ -403,4 +421,82 @@ pub fn open_scene_for(
             create_downscaled: true,
         },
     )?)
+}
+
+/// Writes the render images of a trained result under `dir/renders/`:
+/// - `train/<view>_mid.png`, `_start.png`, `_end.png`: sharp renders at the trajectory's middle
+///   and ends (the deblurred view and the exposure's extent);
+/// - `train/<view>_reblurred.png`: the mean of the n virtual renders, i.e. what the blur model
+///   fits to the blurry input;
+/// - `nvs/<view>.png`: held-out views as evaluated (after test-time pose refinement).
+///
+/// Renders use a black background, like the evaluation, and are clamped to [0, 1] when saved.
+pub fn write_renders(
+    dir: &Path,
+    output: &TrainOutput,
+    data: &EvalData,
+    eval: &Evaluation,
+) -> Result<(), EvalError> {
+    let train_dir = dir.join("renders").join("train");
+    let nvs_dir = dir.join("renders").join("nvs");
+    for d in [&train_dir, &nvs_dir] {
+        std::fs::create_dir_all(d).map_err(|source| EvalError::Io {
+            path: d.clone(),
+            source,
+        })?;
+    }
+    let save = |path: std::path::PathBuf, k: &Intrinsics, data: Vec<f32>| {
+        let img = gems_data::ImageRgb {
+            width: k.width,
+            height: k.height,
+            data,
+        };
+        gems_data::save_png(&path, &img).map_err(EvalError::from)
+    };
+    let mut renderer = Renderer::new();
+    let settings = gems_splat::RenderSettings::default();
+    for v in &output.views {
+        let k = &v.intrinsics;
+        let cams: Vec<_> = v
+            .virtual_c2w
+            .iter()
+            .chain(std::iter::once(&v.mid_c2w))
+            .map(|p| gems_train::blur::camera_from_c2w(&Se3::from(p), k))
+            .collect();
+        let n = v.virtual_c2w.len();
+        let out = renderer.forward(
+            &output.gaussians,
+            &cams,
+            &vec![[0.0; 3]; cams.len()],
+            &settings,
+        )?;
+        let px = (k.width * k.height * 3) as usize;
+        let frame = |i: usize| out.rgb[i * px..(i + 1) * px].to_vec();
+        let mut reblurred = vec![0.0f32; px];
+        for i in 0..n {
+            for (acc, x) in reblurred.iter_mut().zip(&out.rgb[i * px..(i + 1) * px]) {
+                *acc += x / n as f32;
+            }
+        }
+        let stem = file_stem(&v.name);
+        save(train_dir.join(format!("{stem}_mid.png")), k, frame(n))?;
+        if n > 0 {
+            save(train_dir.join(format!("{stem}_start.png")), k, frame(0))?;
+            save(train_dir.join(format!("{stem}_end.png")), k, frame(n - 1))?;
+            save(
+                train_dir.join(format!("{stem}_reblurred.png")),
+                k,
+                reblurred,
+            )?;
+        }
+    }
+    for (view, render) in data.held_out.iter().zip(&eval.nvs.renders) {
+        let stem = file_stem(&view.name);
+        save(
+            nvs_dir.join(format!("{stem}.png")),
+            &view.intrinsics,
+            render.clone(),
+        )?;
+    }
+    Ok(())
 }

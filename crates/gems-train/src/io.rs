@@ -8,7 +8,7 @@
 
 use std::collections::HashMap;
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use gems_math::{Se3, Trajectory};
 use gems_splat::{Gaussians, SH_COEFFS};
@@ -350,6 +350,9 @@ pub struct TrainOutput {
     pub history: History,
     pub seconds: f64,
     pub steps: usize,
+    /// The COLMAP model the initial poses came from, if any. Held-out views are evaluated from
+    /// its poses (through the same normalisation), never from poses of another frame.
+    pub pose_model: Option<PathBuf>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -365,6 +368,8 @@ struct OutputMeta {
     history: History,
     seconds: f64,
     steps: usize,
+    #[serde(default)]
+    pose_model: Option<PathBuf>,
 }
 
 pub const MODEL_TENSORS: &str = "model.safetensors";
@@ -402,6 +407,7 @@ impl TrainOutput {
             history: t.state.history.clone(),
             seconds: t.state.seconds,
             steps: t.state.step,
+            pose_model: None,
         }
     }
 
@@ -433,6 +439,7 @@ impl TrainOutput {
             history: self.history.clone(),
             seconds: self.seconds,
             steps: self.steps,
+            pose_model: self.pose_model.clone(),
         };
         write_atomic(
             &dir.join(MODEL_JSON),
@@ -459,6 +466,7 @@ impl TrainOutput {
             history: meta.history,
             seconds: meta.seconds,
             steps: meta.steps,
+            pose_model: meta.pose_model,
         })
     }
 }

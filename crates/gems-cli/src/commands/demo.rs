@@ -2,8 +2,9 @@
 //!
 //! 1. `gems synth` (small preset with 24 views, so neighbouring views overlap enough for SfM
 //!    under 30 px of blur): an extreme-blur procedural scene with ground truth;
-//! 2. the built-in blur-robust SfM on the blurry images (poses, focal, points) — falling back to
-//!    noisy ground-truth poses, labelled as such, only if SfM fails outright;
+//! 2. the built-in blur-robust SfM on the blurry images (poses and points; the focal length is the
+//!    camera's, as EXIF would give it for a real photo, unless `--estimate-focal`) — falling back
+//!    to noisy ground-truth poses, labelled as such, only if SfM fails outright;
 //! 3. GeMS training (blur model, Bézier trajectories, MCMC) with a short schedule;
 //! 4. evaluation and `report.html`.
 
@@ -34,6 +35,10 @@ pub struct Args {
     /// Initialise from noisy ground-truth poses instead of the built-in SfM.
     #[arg(long)]
     pub gt_noisy: bool,
+    /// Let the SfM estimate the focal length too (by default the camera's focal is given, as a
+    /// photo's EXIF would).
+    #[arg(long)]
+    pub estimate_focal: bool,
     /// Replace the output folder of an earlier demo.
     #[arg(long)]
     pub force: bool,
@@ -82,7 +87,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         gt_noisy()
     } else {
         tracing::info!("2/3 structure from motion on the blurry images");
-        match super::train::run_sfm(&scene, &out.join("sfm"), args.seed) {
+        let focal = (!args.estimate_focal).then_some(summary.intrinsics.fx);
+        match super::train::run_sfm(&scene, &out.join("sfm"), args.seed, focal) {
             Ok(model) => InitMode::Colmap(Some(model)),
             Err(e) => {
                 tracing::warn!(

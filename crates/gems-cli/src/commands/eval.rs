@@ -1,6 +1,6 @@
 //! `gems eval`: re-run the evaluation protocol on a trained output folder (deblurring at the
 //! trajectory midpoints, novel views with and without test-time pose refinement, APE) and
-//! rewrite `metrics.json`, `trajectories/` and `report.html` there. The work is in `gems-eval`.
+//! rewrite `metrics.json`, `trajectories/`, `renders/` and `report.html` there. The work is in `gems-eval`.
 
 use std::path::PathBuf;
 
@@ -76,6 +76,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     write_metrics_json(&args.output.join("metrics.json"), &eval.metrics)?;
     write_trajectories(&args.output, &output)?;
+    gems_eval::write_renders(&args.output, &output, &data, &eval)?;
     let report = write_report(
         &args.output,
         &gems_eval::report_input(&output, &data, &eval, args.grid_rows),

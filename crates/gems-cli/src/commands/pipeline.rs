@@ -33,6 +33,14 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
         .with_context(|| format!("opening scene {}", job.scene.display()))?;
     std::fs::create_dir_all(job.output)
         .with_context(|| format!("creating {}", job.output.display()))?;
+    let pose_model = match &job.mode {
+        InitMode::Colmap(Some(dir)) => Some(std::fs::canonicalize(dir).unwrap_or(dir.clone())),
+        InitMode::Colmap(None) => scene
+            .sfm_dir
+            .as_ref()
+            .map(|d| std::fs::canonicalize(d).unwrap_or(d.clone())),
+        InitMode::Gt | InitMode::GtNoisy { .. } => None,
+    };
 
     let mut trainer = if job.resume && has_checkpoint(job.output) {
         let (ckpt_cfg, state) = load_checkpoint(job.output)?;
@@ -84,7 +92,8 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
     })?;
     bar.finish();
     save_checkpoint(job.output, &trainer)?;
-    let output = TrainOutput::from_trainer(&trainer);
+    let mut output = TrainOutput::from_trainer(&trainer);
+    output.pose_model = pose_model;
     output.save(job.output)?;
     let ply = job.output.join("point_cloud.ply");
     let g_input = output
@@ -126,6 +135,7 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
     bar.finish();
     gems_eval::write_metrics_json(&job.output.join("metrics.json"), &eval.metrics)?;
     gems_eval::write_trajectories(job.output, &output)?;
+    gems_eval::write_renders(job.output, &output, &data, &eval)?;
     let report = gems_eval::write_report(
         job.output,
         &gems_eval::report_input(&output, &data, &eval, 4),

@@ -61,6 +61,10 @@ pub struct Args {
     /// initialisation only; training is still supervised by the blurry images. Implies --init sfm.
     #[arg(long)]
     pub events: bool,
+    /// Focal length in pixels at full image size, for --init sfm when the camera is calibrated
+    /// (EXIF, a calibration file); estimated by the SfM otherwise.
+    #[arg(long)]
+    pub focal: Option<f64>,
     /// Event contrast threshold for EDI (the simulator's or camera's C).
     #[arg(long, default_value_t = 0.2)]
     pub event_threshold: f32,
@@ -99,7 +103,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             } else {
                 args.scene.clone()
             };
-            InitMode::Colmap(Some(run_sfm(&images, &args.output.join("sfm"), cfg.seed)?))
+            InitMode::Colmap(Some(run_sfm(
+                &images,
+                &args.output.join("sfm"),
+                cfg.seed,
+                args.focal,
+            )?))
         }
     };
     let report = train_and_report(TrainJob {
@@ -145,11 +154,17 @@ pub fn edi_images(scene: &Path, output: &Path, threshold: f32) -> anyhow::Result
 }
 
 /// Runs the built-in SfM on `images` (a scene folder or an image folder), writes its outputs to
-/// `out` and returns the COLMAP model folder. Views it could not register are reported by name.
-pub fn run_sfm(images: &Path, out: &Path, seed: u64) -> anyhow::Result<PathBuf> {
+/// `out` and returns the COLMAP model folder. `focal_px` fixes a known focal (calibrated camera). Views it could not register are reported by name.
+pub fn run_sfm(
+    images: &Path,
+    out: &Path,
+    seed: u64,
+    focal_px: Option<f64>,
+) -> anyhow::Result<PathBuf> {
     let imgs = gems_init::sfm::load_images(images)?;
     let opts = gems_init::sfm::SfmOptions {
         seed,
+        focal_px,
         ..Default::default()
     };
     tracing::info!(images = imgs.len(), "structure from motion");
