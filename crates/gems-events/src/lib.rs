@@ -9,7 +9,10 @@
 //!
 //! # Files
 //! - [`read_events`] dispatches on the extension: `.txt`/`.csv` ECD/v2e text, `.npy`/`.npz`,
-//!   `.aedat4` (events only; [`read_aedat4`] also returns the APS frames with their exposure times).
+//!   `.aedat4` (events only; [`read_aedat4`] also returns the APS frames with their exposure times),
+//!   and `.h5`/`.hdf5` with the cargo feature `hdf5` (`read_events_hdf5`; needs the system HDF5
+//!   library, e.g. Debian's `libhdf5-dev`). Without the feature, HDF5 files get an error that
+//!   shows a one-line h5py → npz conversion.
 //! - [`write_events_npz`] / [`write_events_text`] write atomically (temp file + rename).
 //! - [`read_exposure_windows`] reads `exposure_start_ts.txt`/`exposure_end_ts.txt`.
 //! - [`read_bin_counts`] / [`write_bin_counts`] handle count tensors as `.npy`.
@@ -21,6 +24,8 @@
 mod aedat;
 mod exposure;
 mod folder;
+#[cfg(feature = "hdf5")]
+mod hdf5;
 mod npy;
 mod read;
 mod sim;
@@ -29,6 +34,8 @@ mod text;
 
 use std::path::PathBuf;
 
+#[cfg(feature = "hdf5")]
+pub use self::hdf5::read_events_hdf5;
 pub use aedat::{AedatFrame, AedatRecording, read_aedat4};
 pub use exposure::{ExposureWindow, read_exposure_windows};
 pub use folder::{FrameEncoding, list_frames, read_luminance, simulate_folder};

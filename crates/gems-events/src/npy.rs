@@ -213,7 +213,11 @@ fn read_column_bytes(
 }
 
 /// Converts a time column to µs: integers use `opts.int_time_unit`, floats `opts.float_time_unit`.
-fn time_column(col: Column, opts: &ReadOptions, path: &Path) -> Result<Vec<i64>, EventError> {
+pub(crate) fn time_column(
+    col: Column,
+    opts: &ReadOptions,
+    path: &Path,
+) -> Result<Vec<i64>, EventError> {
     match col {
         Column::Int(v) => opts
             .int_time_unit

@@ -65,7 +65,8 @@ impl Default for ReadOptions {
 }
 
 /// Reads an event file, choosing the format from the extension: `.txt`/`.csv`/`.dat` (ECD/v2e
-/// text), `.npy`/`.npz`, `.aedat4`. The result is time-sorted (stably, when the file is not).
+/// text), `.npy`/`.npz`, `.aedat4`, and `.h5`/`.hdf5` when built with the `hdf5` feature (without it,
+/// the error shows a one-line h5py → npz conversion). The result is time-sorted (stably, when the file is not).
 pub fn read_events(path: &Path, opts: &ReadOptions) -> Result<EventStream, EventError> {
     let ext = path
         .extension()
@@ -90,6 +91,9 @@ pub fn read_events(path: &Path, opts: &ReadOptions) -> Result<EventStream, Event
                 _ => Ok(rec.events),
             }
         }
+        #[cfg(feature = "hdf5")]
+        "h5" | "hdf5" => crate::read_events_hdf5(path, opts),
+        #[cfg(not(feature = "hdf5"))]
         "h5" | "hdf5" => Err(EventError::format(
             path,
             "HDF5 event files are not supported by this build; convert once with \
@@ -97,7 +101,7 @@ pub fn read_events(path: &Path, opts: &ReadOptions) -> Result<EventStream, Event
         )),
         _ => Err(EventError::format(
             path,
-            "unknown event file type (expected .txt, .csv, .npy, .npz or .aedat4)",
+            "unknown event file type (expected .txt, .csv, .npy, .npz, .aedat4 or .h5)",
         )),
     }
 }
