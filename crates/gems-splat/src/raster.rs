@@ -82,57 +82,23 @@ struct Bins {
     cursor: Vec<u32>,
 }
 
-/// Tile-local copy of the splats in a tile's list (structure of arrays), reused across tiles.
-#[derive(Default)]
-struct TileScratch {
-    x: Vec<f32>,
-    y: Vec<f32>,
-    a: Vec<f32>,
-    b: Vec<f32>,
-    c: Vec<f32>,
-    o: Vec<f32>,
-    col: Vec<[f32; 3]>,
-    z: Vec<f32>,
-    /// Tile-local pixel box `[x0, x1) × [y0, y1)` the splat can draw into.
-    bx: Vec<[u8; 4]>,
-}
-
-impl TileScratch {
-    /// Copies the tile's splats; `origin` is the tile's first pixel.
-    fn load(&mut self, splats: &[Splat], origin: (usize, usize)) {
-        self.x.clear();
-        self.y.clear();
-        self.a.clear();
-        self.b.clear();
-        self.c.clear();
-        self.o.clear();
-        self.col.clear();
-        self.z.clear();
-        self.bx.clear();
-        for s in splats {
-            self.x.push(s.x);
-            self.y.push(s.y);
-            self.a.push(s.conic[0]);
-            self.b.push(s.conic[1]);
-            self.c.push(s.conic[2]);
-            self.o.push(s.opacity);
-            self.col.push(s.color);
-            self.z.push(s.depth);
-            let local = |lo: i32, hi: i32, o: usize| {
-                let o = o as i32;
-                let (lo, hi) = (lo.max(o), hi.min(o + TILE as i32 - 1));
-                if lo <= hi {
-                    ((lo - o) as u8, (hi - o + 1) as u8)
-                } else {
-                    (0, 0)
-                }
-            };
-            let [px0, px1, py0, py1] = s.pbox;
-            let (x0, x1) = local(px0, px1, origin.0);
-            let (y0, y1) = local(py0, py1, origin.1);
-            self.bx.push([x0, x1, y0, y1]);
+/// Tile-local pixel box `[x0, x1) × [y0, y1)` a splat with pixel range `pbox` can draw into,
+/// for the tile whose first pixel is `origin`.
+#[inline(always)]
+fn tile_box(pbox: [i32; 4], origin: (usize, usize)) -> [usize; 4] {
+    let local = |lo: i32, hi: i32, o: usize| {
+        let o = o as i32;
+        let (lo, hi) = (lo.max(o), hi.min(o + TILE as i32 - 1));
+        if lo <= hi {
+            ((lo - o) as usize, (hi - o + 1) as usize)
+        } else {
+            (0, 0)
         }
-    }
+    };
+    let [px0, px1, py0, py1] = pbox;
+    let (x0, x1) = local(px0, px1, origin.0);
+    let (y0, y1) = local(py0, py1, origin.1);
+    [x0, x1, y0, y1]
 }
 
 /// Inclusive range of pixel indices in `[0, n)` whose centre is within `extent` of `mean`.
@@ -282,21 +248,26 @@ impl Renderer {
         )
             .into_par_iter()
             .enumerate()
-            .for_each_init(
-                TileScratch::default,
-                |scratch, (gt, (rgb, t, last, depth))| {
-                    let (c, tile) = (gt / tiles, gt % tiles);
-                    let b = &bins[c];
-                    let range = b.offsets[tile] as usize..b.offsets[tile + 1] as usize;
-                    if range.is_empty() {
-                        return;
-                    }
-                    let (tx, ty) = (tile % tiles_x, tile / tiles_x);
-                    let origin = (tx * TILE, ty * TILE);
-                    scratch.load(&b.packed[range.clone()], origin);
-                    raster_tile_forward(scratch, &rules, origin, (w, h), rgb, t, last, depth);
-                },
-            );
+            .for_each(|(gt, (rgb, t, last, depth))| {
+                let (c, tile) = (gt / tiles, gt % tiles);
+                let b = &bins[c];
+                let range = b.offsets[tile] as usize..b.offsets[tile + 1] as usize;
+                if range.is_empty() {
+                    return;
+                }
+                let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+                let origin = (tx * TILE, ty * TILE);
+                raster_tile_forward(
+                    &b.packed[range],
+                    &rules,
+                    origin,
+                    (w, h),
+                    rgb,
+                    t,
+                    last,
+                    depth,
+                );
+            });
 
         // Tile-major → [C,H,W] with the background.
         let mut rgb = vec![0.0f32; nc * h * w * 3];
@@ -444,7 +415,7 @@ impl Renderer {
             .into_par_iter()
             .zip(self.tile_bg_grads.par_iter_mut())
             .enumerate()
-            .for_each_init(TileScratch::default, |scratch, (gt, (grads, bg_grad))| {
+            .for_each(|(gt, (grads, bg_grad))| {
                 let (c, tile) = (gt / tiles, gt % tiles);
                 let (tx, ty) = (tile % tiles_x, tile / tiles_x);
                 let px = gt * TILE_PIXELS;
@@ -454,7 +425,7 @@ impl Renderer {
                 // Entries behind every pixel's last contributor are never revisited.
                 let last = &tile_last[px..px + TILE_PIXELS];
                 let used = last.iter().copied().max().unwrap_or(0) as usize;
-                scratch.load(&b.packed[range.start..range.start + used], origin);
+                let list = &b.packed[range.start..range.start + used];
                 let img = c * h * w;
                 let ctx = TileBackward {
                     rules: &rules,
@@ -467,7 +438,7 @@ impl Renderer {
                     d_alpha: d_alpha.map(|da| &da[img..img + h * w]),
                     bg: backgrounds[c],
                 };
-                *bg_grad = raster_tile_backward(scratch, &ctx, grads);
+                *bg_grad = raster_tile_backward(list, &ctx, grads);
             });
 
         // Per camera: sum the intersections of each Gaussian in list order.
@@ -684,7 +655,7 @@ macro_rules! multiversion {
 /// zeros and keep their state.
 #[allow(clippy::too_many_arguments)]
 fn raster_tile_forward(
-    sc: &TileScratch,
+    sc: &[Splat],
     rules: &PixelRules,
     origin: (usize, usize),
     size: (usize, usize),
@@ -704,7 +675,7 @@ fn raster_tile_forward(
 }
 
 multiversion!("avx2", raster_tile_forward_generic, raster_tile_forward_avx2, (
-    sc: &TileScratch,
+    sc: &[Splat],
     rules: &PixelRules,
     origin: (usize, usize),
     size: (usize, usize),
@@ -717,7 +688,7 @@ multiversion!("avx2", raster_tile_forward_generic, raster_tile_forward_avx2, (
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn raster_tile_forward_generic(
-    sc: &TileScratch,
+    sc: &[Splat],
     rules: &PixelRules,
     origin: (usize, usize),
     (w, h): (usize, usize),
@@ -743,12 +714,12 @@ fn raster_tile_forward_generic(
     }
     let lane_offset: [f32; LANES] = std::array::from_fn(|i| i as f32);
     let (amin, amax, tmin) = (rules.alpha_min, rules.alpha_max, rules.t_min);
-    for j in 0..sc.x.len() {
-        let [x0, x1, y0, y1] = sc.bx[j].map(usize::from);
-        let (mx, my) = (sc.x[j], sc.y[j]);
-        let (ca, cbb, cc, op) = (sc.a[j], sc.b[j], sc.c[j], sc.o[j]);
-        let [r, g, b] = sc.col[j];
-        let z = sc.z[j];
+    for (j, sp) in sc.iter().enumerate() {
+        let [x0, x1, y0, y1] = tile_box(sp.pbox, origin);
+        let (mx, my) = (sp.x, sp.y);
+        let ([ca, cbb, cc], op) = (sp.conic, sp.opacity);
+        let [r, g, b] = sp.color;
+        let z = sp.depth;
         let id = j as u32 + 1;
         let px0 = mx - (origin.0 as f32 + 0.5);
         // Per lane, so that the count stays a vector add.
@@ -823,11 +794,7 @@ struct TileBackward<'a> {
 /// colour behind, `LANES` pixels at a time with masks (as in the forward); writes each list
 /// entry's summed gradient into `grads` (per-lane partial sums added in lane order, so the
 /// result is deterministic) and returns the tile's background gradient.
-fn raster_tile_backward(
-    sc: &TileScratch,
-    ctx: &TileBackward<'_>,
-    grads: &mut [SplatGrad],
-) -> [f64; 3] {
+fn raster_tile_backward(sc: &[Splat], ctx: &TileBackward<'_>, grads: &mut [SplatGrad]) -> [f64; 3] {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::is_x86_feature_detected as has;
@@ -844,7 +811,7 @@ fn raster_tile_backward(
 }
 
 multiversion!("avx2", raster_tile_backward_generic, raster_tile_backward_avx2, (
-    sc: &TileScratch,
+    sc: &[Splat],
     ctx: &TileBackward<'_>,
     grads: &mut [SplatGrad],
 ) -> [f64; 3]);
@@ -853,7 +820,7 @@ multiversion!("avx2", raster_tile_backward_generic, raster_tile_backward_avx2, (
 // the spills of the backward's many accumulators (about 10% faster here; the forward, with
 // fewer live values, runs slower this way and stays on AVX2).
 multiversion!("avx2,avx512f,avx512vl", raster_tile_backward_generic, raster_tile_backward_avx512, (
-    sc: &TileScratch,
+    sc: &[Splat],
     ctx: &TileBackward<'_>,
     grads: &mut [SplatGrad],
 ) -> [f64; 3]);
@@ -866,7 +833,7 @@ fn lane_sum(v: &[f32; LANES]) -> f32 {
 
 #[inline(always)]
 fn raster_tile_backward_generic(
-    sc: &TileScratch,
+    sc: &[Splat],
     ctx: &TileBackward<'_>,
     grads: &mut [SplatGrad],
 ) -> [f64; 3] {
@@ -910,10 +877,11 @@ fn raster_tile_backward_generic(
     let [vr, vg, vb] = &vc;
     let [br, bgr, bb] = &mut behind;
     for j in (0..max_last as usize).rev() {
-        let [x0, x1, y0, y1] = sc.bx[j].map(usize::from);
-        let (mx, my) = (sc.x[j], sc.y[j]);
-        let (ca, cb, cc, op) = (sc.a[j], sc.b[j], sc.c[j], sc.o[j]);
-        let col = sc.col[j];
+        let sp = &sc[j];
+        let [x0, x1, y0, y1] = tile_box(sp.pbox, ctx.origin);
+        let (mx, my) = (sp.x, sp.y);
+        let ([ca, cb, cc], op) = (sp.conic, sp.opacity);
+        let col = sp.color;
         let px0 = mx - (ox as f32 + 0.5);
         let jj = j as u32;
         let mut g_col = [[0.0f32; LANES]; 3];
@@ -1001,8 +969,8 @@ mod tests {
     }
 
     /// Random splats of one tile (partly outside a 40×40 image) in depth order, with their
-    /// drawable pixel boxes, loaded as the renderer loads them.
-    fn random_tile(seed: u32, count: usize) -> (TileScratch, (usize, usize), (usize, usize)) {
+    /// drawable pixel boxes.
+    fn random_tile(seed: u32, count: usize) -> (Vec<Splat>, (usize, usize), (usize, usize)) {
         let mut state = seed;
         let mut next = || {
             state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
@@ -1031,9 +999,7 @@ mod tests {
                 }
             })
             .collect();
-        let mut sc = TileScratch::default();
-        sc.load(&splats, origin);
-        (sc, origin, size)
+        (splats, origin, size)
     }
 
     type TileForwardFn<'a> = dyn Fn(&mut [[f32; 3]], &mut [f32], &mut [u32], &mut [f32]) + 'a;
