@@ -25,25 +25,8 @@ impl Pose {
     /// Pose from a Hamilton unit quaternion `[w, x, y, z]` (normalised here) and a translation,
     /// both world-to-camera as COLMAP stores them.
     pub fn from_quaternion(q: [f64; 4], translation: [f64; 3]) -> Pose {
-        let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-        let [w, x, y, z] = [q[0] / n, q[1] / n, q[2] / n, q[3] / n];
-        let rotation = [
-            [
-                1.0 - 2.0 * (y * y + z * z),
-                2.0 * (x * y - w * z),
-                2.0 * (x * z + w * y),
-            ],
-            [
-                2.0 * (x * y + w * z),
-                1.0 - 2.0 * (x * x + z * z),
-                2.0 * (y * z - w * x),
-            ],
-            [
-                2.0 * (x * z - w * y),
-                2.0 * (y * z + w * x),
-                1.0 - 2.0 * (x * x + y * y),
-            ],
-        ];
+        let m = gems_math::quat_wxyz_to_rotation(q);
+        let rotation = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]));
         Pose {
             rotation,
             translation,
