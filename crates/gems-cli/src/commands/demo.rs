@@ -107,7 +107,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     cfg.mcmc.cap_max = args.cap_max;
     // The paper accumulates trajectory gradients over 25 steps: 280 knot updates in its 7000
-    // steps. A short run keeps the number of updates by stepping the knots every step.
+    // steps. A short run keeps that number of updates by accumulating over proportionally fewer
+    // steps (3 for the default 1000).
     cfg.pose.accumulate_steps = (25 * cfg.steps / 7000).max(1);
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("invalid demo configuration: {e}"))?;
