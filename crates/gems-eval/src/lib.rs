@@ -14,8 +14,9 @@
 //! - [`tum`]: TUM trajectory files; [`write_trajectories`] writes every view's n virtual poses
 //!   plus the midpoints (and ground truth when known), in the input frame.
 //! - [`report`]: `report.html` with loss/PSNR curves, a trajectory plot and a
-//!   blurry | ours | ground-truth grid (PNG via plotters, no text in the images); its inputs come
-//!   from [`report_input`].
+//!   blurry | ours | ground-truth grid, with an EDI column between blurry and ours when the run
+//!   used events ([`attach_edi_images`]), and per-row PSNRs (PNG via plotters, no text in the
+//!   images); its inputs come from [`report_input`].
 //!
 //! Typical use after training (what `gems train` and `gems eval` do):
 //! ```text
@@ -41,7 +42,7 @@ pub use evaluate::{
 pub use refine::{PoseRefineConfig, Refined, refine_pose};
 pub use report::{GridRow, ReportInput, write_report};
 pub use trainer_eval::{
-    EvalData, Evaluation, HeldOutView, eval_data_from_scene, evaluate_output,
+    EvalData, Evaluation, HeldOutView, attach_edi_images, eval_data_from_scene, evaluate_output,
     evaluate_output_with_progress, evaluation_units, open_scene_for, report_input, write_renders,
     write_trajectories,
 };

@@ -19,6 +19,8 @@ pub struct GridRow {
     pub width: u32,
     pub height: u32,
     pub blurry: Vec<f32>,
+    /// The EDI-deblurred image (GeMS-E initialisation input) when the run used events.
+    pub edi: Option<Vec<f32>>,
     pub ours: Vec<f32>,
     pub gt: Option<Vec<f32>>,
 }
@@ -218,12 +220,14 @@ fn plot_trajectories(path: &Path, input: &ReportInput) -> Result<bool, EvalError
     Ok(true)
 }
 
-/// Rows of blurry | ours | ground truth separated by white gaps.
+/// Rows of blurry | EDI (when any row has one) | ours | ground truth separated by white gaps.
 fn compose_grid(rows: &[GridRow]) -> Option<ImageRgb> {
     let gap = 4u32;
     let w = rows.iter().map(|r| r.width).max()?;
     let total_h: u32 = rows.iter().map(|r| r.height + gap).sum::<u32>() - gap;
-    let total_w = 3 * w + 2 * gap;
+    let with_edi = rows.iter().any(|r| r.edi.is_some());
+    let columns = if with_edi { 4 } else { 3 };
+    let total_w = columns * w + (columns - 1) * gap;
     let mut img = ImageRgb {
         width: total_w,
         height: total_h,
@@ -231,7 +235,11 @@ fn compose_grid(rows: &[GridRow]) -> Option<ImageRgb> {
     };
     let mut y0 = 0;
     for r in rows {
-        let panels = [Some(&r.blurry), Some(&r.ours), r.gt.as_ref()];
+        let mut panels = vec![Some(&r.blurry)];
+        if with_edi {
+            panels.push(r.edi.as_ref());
+        }
+        panels.extend([Some(&r.ours), r.gt.as_ref()]);
         for (p, panel) in panels.iter().enumerate() {
             let Some(src) = panel else { continue };
             let x0 = p as u32 * (w + gap);
@@ -365,13 +373,40 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
     }
     if let Some(grid) = compose_grid(&input.grid) {
         save_png(&fig_dir.join("grid.png"), &grid)?;
-        let names: Vec<String> = input.grid.iter().map(|r| esc(&r.name)).collect();
+        let with_edi = input.grid.iter().any(|r| r.edi.is_some());
+        let heading = if with_edi {
+            "Blurry input | EDI from events (initialisation only) | ours (trajectory midpoint) | ground truth"
+        } else {
+            "Blurry input | ours (trajectory midpoint) | ground truth"
+        };
         let _ = writeln!(
             html,
-            "<h2>Blurry input | ours (trajectory midpoint) | ground truth</h2>\n<p>Rows: {}</p>\
-             <img src=\"report/grid.png\">",
-            names.join(", ")
+            "<h2>{heading}</h2>\n<img src=\"report/grid.png\">\n<table>\n<tr><th>row</th>\
+             <th>blurry PSNR</th>{}<th>ours PSNR</th></tr>",
+            if with_edi { "<th>EDI PSNR</th>" } else { "" }
         );
+        for r in &input.grid {
+            let gt = r.gt.as_ref();
+            let (h, w) = (r.height as usize, r.width as usize);
+            let cell = |img: Option<&Vec<f32>>| match (img, gt) {
+                (Some(a), Some(b)) => gems_metrics::psnr(a, b, h, w)
+                    .map_or_else(|_| "—".to_string(), |p| format!("{p:.2} dB")),
+                _ => "—".to_string(),
+            };
+            let _ = writeln!(
+                html,
+                "<tr><td>{}</td><td>{}</td>{}<td>{}</td></tr>",
+                esc(&r.name),
+                cell(Some(&r.blurry)),
+                if with_edi {
+                    format!("<td>{}</td>", cell(r.edi.as_ref()))
+                } else {
+                    String::new()
+                },
+                cell(Some(&r.ours))
+            );
+        }
+        html.push_str("</table>\n");
     }
     html.push_str("</body></html>\n");
     let path = dir.join("report.html");

@@ -37,6 +37,9 @@ pub struct EvalData {
     pub train_gt: Vec<Option<Vec<f32>>>,
     /// The blurry training inputs (same order; empty if not loaded), for the report grid.
     pub train_blurry: Vec<Option<Vec<f32>>>,
+    /// EDI-deblurred images of the training views (same order; empty unless
+    /// [`attach_edi_images`] found them), the report's GeMS-E column.
+    pub train_edi: Vec<Option<Vec<f32>>>,
     pub held_out: Vec<HeldOutView>,
 }
 
@@ -328,6 +331,42 @@ pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalD
     Ok(data)
 }
 
+/// Loads the EDI-deblurred image of each training view from `edi_images` (a folder of images
+/// named like the views, as `gems edi` / `gems train --events` write them) into
+/// `data.train_edi`, area-downscaled to the trained resolution when training ran downscaled.
+/// Views without an EDI image get `None`. Returns how many were found.
+pub fn attach_edi_images(
+    data: &mut EvalData,
+    output: &TrainOutput,
+    edi_images: &Path,
+) -> Result<usize, EvalError> {
+    data.train_edi.clear();
+    for v in &output.views {
+        let path = edi_images.join(&v.name);
+        if !path.is_file() {
+            data.train_edi.push(None);
+            continue;
+        }
+        let img = load_image(&path)?;
+        let k = &v.intrinsics;
+        let img = if (img.width, img.height) == (k.width, k.height) {
+            img
+        } else if img.width >= k.width && img.height >= k.height {
+            gems_data::image::downscale_area(&img, k.width, k.height)
+        } else {
+            return Err(EvalError::Format {
+                path,
+                reason: format!(
+                    "EDI image is {}x{}, smaller than the trained view's {}x{}",
+                    img.width, img.height, k.width, k.height
+                ),
+            });
+        };
+        data.train_edi.push(Some(img.data));
+    }
+    Ok(data.train_edi.iter().flatten().count())
+}
+
 /// The report's inputs: curves from the training history, every view's virtual camera centres
 /// (input frame), and a grid of up to `max_rows` deblurred training views.
 pub fn report_input(
@@ -350,6 +389,7 @@ pub fn report_input(
                 width: view.intrinsics.width,
                 height: view.intrinsics.height,
                 blurry,
+                edi: data.train_edi.get(v).cloned().flatten(),
                 ours: render.clone(),
                 gt: data.train_gt.get(v).cloned().flatten(),
             })

@@ -198,6 +198,7 @@ fn report_writes_html_and_figures() {
             width: w,
             height: h,
             blurry: img(0.2),
+            edi: None,
             ours: img(0.5),
             gt: Some(img(0.9)),
         }],
@@ -221,4 +222,20 @@ fn report_writes_html_and_figures() {
     assert!(
         (grid.pixel(1, 1)[0] - 0.2).abs() < 0.01 && (grid.pixel(w + 5, 1)[0] - 0.5).abs() < 0.01
     );
+    assert!(!html.contains("EDI"), "no EDI column without EDI images");
+    // blurry 0.2 vs gt 0.9: 20·log10(1/0.7) = 3.10 dB; ours 0.5: 7.96 dB
+    assert!(html.contains("3.10 dB") && html.contains("7.96 dB"));
+
+    // With an EDI image the grid gains a column between the input and ours.
+    let mut with_edi = input.clone();
+    with_edi.grid[0].edi = Some(img(0.7));
+    let dir2 = tempfile::tempdir().unwrap();
+    let html = std::fs::read_to_string(write_report(dir2.path(), &with_edi).unwrap()).unwrap();
+    assert!(html.contains("EDI from events") && html.contains("13.98 dB"));
+    let grid = gems_data::load_image(&dir2.path().join("report/grid.png")).unwrap();
+    assert_eq!((grid.width, grid.height), (4 * w + 12, h));
+    let col = |k: u32| grid.pixel(k * (w + 4) + 1, 1)[0];
+    for (k, v) in [(0, 0.2), (1, 0.7), (2, 0.5), (3, 0.9)] {
+        assert!((col(k) - v).abs() < 0.01, "column {k}: {} vs {v}", col(k));
+    }
 }

@@ -131,9 +131,17 @@ fn protocol_and_outputs() {
     );
     let html = write_report(dir.path(), &report_input(&out, &data, &eval, 3)).unwrap();
     let text = std::fs::read_to_string(html).unwrap();
-    assert!(
-        text.contains("Rows: images/0000.png, images/0001.png, images/0002.png</p>"),
-        "grid limited to 3 rows"
+    let grid_section = &text[text.find("report/grid.png").expect("grid in the report")..];
+    let rows: Vec<&str> = grid_section
+        .split("<tr><td>")
+        .skip(1)
+        .filter_map(|r| r.split("</td>").next())
+        .filter(|name| name.starts_with("images/"))
+        .collect();
+    assert_eq!(
+        rows,
+        ["images/0000.png", "images/0001.png", "images/0002.png"],
+        "grid limited to 3 rows, one PSNR row each"
     );
     let grid = gems_data::load_image(&dir.path().join("report/grid.png")).unwrap();
     assert_eq!(grid.height, 3 * 60 + 2 * 4);

@@ -42,7 +42,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )
     })?;
     let scene = gems_eval::open_scene_for(&output, &args.scene, args.hold)?;
-    let data = gems_eval::eval_data_from_scene(&output, &scene)?;
+    let mut data = gems_eval::eval_data_from_scene(&output, &scene)?;
+    super::pipeline::attach_edi(&mut data, &output, &args.output)?;
     let lpips = if args.lpips.is_empty() {
         tracing::warn!("no --lpips weights given: LPIPS will be reported as absent");
         None

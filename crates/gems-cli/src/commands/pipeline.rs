@@ -112,7 +112,8 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
         return Ok(None);
     }
     let scene = gems_eval::trainer_eval::open_scene_for(&output, job.scene, None)?;
-    let data = gems_eval::eval_data_from_scene(&output, &scene)?;
+    let mut data = gems_eval::eval_data_from_scene(&output, &scene)?;
+    attach_edi(&mut data, &output, job.output)?;
     let lpips = if job.lpips.is_empty() {
         tracing::warn!("no --lpips weights given: LPIPS is reported as absent");
         None
@@ -141,4 +142,18 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
         &gems_eval::report_input(&output, &data, &eval, 4),
     )?;
     Ok(Some(report))
+}
+
+/// Puts the EDI images of a `--events` run (`<output>/edi/images`) into the report's grid.
+pub fn attach_edi(
+    data: &mut gems_eval::EvalData,
+    output: &TrainOutput,
+    dir: &Path,
+) -> anyhow::Result<()> {
+    let edi = dir.join("edi").join("images");
+    if edi.is_dir() {
+        let n = gems_eval::attach_edi_images(data, output, &edi)?;
+        tracing::info!(views = n, dir = %edi.display(), "EDI images added to the report");
+    }
+    Ok(())
 }

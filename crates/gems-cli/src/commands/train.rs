@@ -21,6 +21,9 @@ pub enum Init {
     GtNoisy,
     /// Built-in blur-robust SfM on the scene's images (written to `<output>/sfm`).
     Sfm,
+    /// A user-installed COLMAP (feature extractor, exhaustive matcher, mapper) run as a
+    /// subprocess on the scene's images; its largest model is imported (`<output>/colmap`).
+    ColmapCli,
 }
 
 /// Arguments of `gems train`.
@@ -58,13 +61,17 @@ pub struct Args {
     #[arg(long)]
     pub resume: bool,
     /// Use the scene's events: EDI-deblurred images (written to `<output>/edi`) feed the SfM
-    /// initialisation only; training is still supervised by the blurry images. Implies --init sfm.
+    /// initialisation only; training is still supervised by the blurry images. Runs the built-in
+    /// SfM on them, or COLMAP with --init colmap-cli.
     #[arg(long)]
     pub events: bool,
     /// Focal length in pixels at full image size, for --init sfm when the camera is calibrated
     /// (EXIF, a calibration file); estimated by the SfM otherwise.
     #[arg(long)]
     pub focal: Option<f64>,
+    /// The COLMAP executable for --init colmap-cli.
+    #[arg(long, default_value = "colmap")]
+    pub colmap_binary: PathBuf,
     /// Event contrast threshold for EDI (the simulator's or camera's C).
     #[arg(long, default_value_t = 0.2)]
     pub event_threshold: f32,
@@ -89,7 +96,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("invalid configuration: {e}"))?;
-    let init = if args.events { Init::Sfm } else { args.init };
+    let init = match (args.events, args.init) {
+        (true, Init::ColmapCli) => Init::ColmapCli,
+        (true, _) => Init::Sfm,
+        (false, init) => init,
+    };
+    // With events, the initialiser sees the EDI-deblurred images instead of the blurry ones.
+    let init_images = || -> anyhow::Result<PathBuf> {
+        if args.events {
+            edi_images(&args.scene, &args.output, args.event_threshold)
+        } else {
+            Ok(args.scene.clone())
+        }
+    };
     let mode = match init {
         Init::Colmap => InitMode::Colmap(args.colmap_model.clone()),
         Init::Gt => InitMode::Gt,
@@ -97,19 +116,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             translation_std: args.noise_translation,
             rotation_std: args.noise_rotation,
         },
-        Init::Sfm => {
-            let images = if args.events {
-                edi_images(&args.scene, &args.output, args.event_threshold)?
-            } else {
-                args.scene.clone()
-            };
-            InitMode::Colmap(Some(run_sfm(
-                &images,
-                &args.output.join("sfm"),
-                cfg.seed,
-                args.focal,
-            )?))
-        }
+        Init::Sfm => InitMode::Colmap(Some(run_sfm(
+            &init_images()?,
+            &args.output.join("sfm"),
+            cfg.seed,
+            args.focal,
+        )?)),
+        Init::ColmapCli => InitMode::Colmap(Some(run_colmap(
+            &init_images()?,
+            &args.output.join("colmap"),
+            &args.colmap_binary,
+            args.focal,
+        )?)),
     };
     let report = train_and_report(TrainJob {
         scene: &args.scene,
@@ -187,4 +205,37 @@ pub fn run_sfm(
         );
     }
     Ok(out.join("sparse").join("0"))
+}
+
+/// Runs a user-installed COLMAP on `images` (a scene folder with `images/`, or an image folder),
+/// writes the imported model to `<out>/sparse/0` and returns that folder. Views COLMAP did not
+/// register are named and skipped when training prepares its views.
+pub fn run_colmap(
+    images: &Path,
+    out: &Path,
+    binary: &Path,
+    focal_px: Option<f64>,
+) -> anyhow::Result<PathBuf> {
+    let img_dir = if images.join("images").is_dir() {
+        images.join("images")
+    } else {
+        images.to_path_buf()
+    };
+    let opts = gems_init::sfm::ColmapCliOptions {
+        binary: binary.to_path_buf(),
+        focal_px,
+        use_gpu: false,
+    };
+    tracing::info!(images = %img_dir.display(), colmap = %binary.display(), "running COLMAP");
+    let (model, _) = gems_init::sfm::run_colmap_cli(&img_dir, &out.join("work"), &opts)?;
+    let sparse = out.join("sparse").join("0");
+    gems_data::colmap::write_model(&sparse, &model, gems_data::colmap::ModelFormat::Binary)
+        .context("writing the imported COLMAP model")?;
+    // Views COLMAP left out are named by the trainer's preparation, which skips them.
+    tracing::info!(
+        registered = model.images.len(),
+        points = model.points.len(),
+        "COLMAP model imported"
+    );
+    Ok(sparse)
 }
