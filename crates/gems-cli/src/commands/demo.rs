@@ -3,8 +3,9 @@
 //! 1. `gems synth` (small preset with 24 views, so neighbouring views overlap enough for SfM
 //!    under 30 px of blur): an extreme-blur procedural scene with ground truth;
 //! 2. the built-in blur-robust SfM on the blurry images (poses and points; the focal length is the
-//!    camera's, as EXIF would give it for a real photo, unless `--estimate-focal`) — falling back
-//!    to noisy ground-truth poses, labelled as such, only if SfM fails outright;
+//!    camera's, as EXIF would give it for a real photo, unless `--estimate-focal`) — with
+//!    `--events`, on the images the scene's events deblur by EDI (GeMS-E) — falling back to noisy
+//!    ground-truth poses, labelled as such, only if SfM fails outright;
 //! 3. GeMS training (blur model, Bézier trajectories, MCMC) with a short schedule (trajectory
 //!    gradients accumulated over proportionally fewer steps, so the knots get as many updates);
 //! 4. evaluation and `report.html`.
@@ -40,6 +41,10 @@ pub struct Args {
     /// photo's EXIF would).
     #[arg(long)]
     pub estimate_focal: bool,
+    /// GeMS-E: deblur the blurry images with the scene's simulated events (EDI) and run the SfM
+    /// on those; training still fits the blurry images. The report gains an EDI column.
+    #[arg(long, conflicts_with = "gt_noisy")]
+    pub events: bool,
     /// Replace the output folder of an earlier demo.
     #[arg(long)]
     pub force: bool,
@@ -87,9 +92,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mode = if args.gt_noisy {
         gt_noisy()
     } else {
-        tracing::info!("2/3 structure from motion on the blurry images");
         let focal = (!args.estimate_focal).then_some(summary.intrinsics.fx);
-        match super::train::run_sfm(&scene, &out.join("sfm"), args.seed, focal) {
+        let sfm_images = if args.events {
+            tracing::info!("2/3 EDI deblurring with the events, then structure from motion");
+            let threshold = synth.events.as_ref().map_or(0.2, |e| e.threshold_pos);
+            super::train::edi_images(&scene, &out.join("train"), threshold)?
+        } else {
+            tracing::info!("2/3 structure from motion on the blurry images");
+            scene.clone()
+        };
+        match super::train::run_sfm(&sfm_images, &out.join("sfm"), args.seed, focal) {
             Ok(model) => InitMode::Colmap(Some(model)),
             Err(e) => {
                 tracing::warn!(
