@@ -78,6 +78,21 @@ fn train_from_colmap_cli_with_and_without_events() {
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(!html.contains("EDI from events"));
 
+    // --resume reuses the imported model: COLMAP is not run again (here it could not be).
+    ok(&gems(&[
+        "train",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--init",
+        "colmap-cli",
+        "--colmap-binary",
+        "/nonexistent/colmap",
+        "--steps",
+        "30",
+        "--resume",
+    ]));
+
     // With events: EDI images feed COLMAP, the report shows them in their own column.
     let out = dir.path().join("run_events");
     ok(&gems(&[

@@ -18,8 +18,10 @@ pub enum LinearisationArg {
     Srgb,
     /// `linear^(1/gamma)` values, blur in linear light.
     Gamma,
-    /// Blur = mean of encoded frames (GeMS/BAD/`gems synth` model); exponent scaled by 1/gamma.
+    /// Blur = mean of `linear^(1/gamma)` frames; exponent scaled by 1/gamma.
     EncodedAverage,
+    /// Blur = mean of sRGB-encoded frames (`gems synth`, GeMS/BAD model); exact sRGB curve.
+    SrgbEncodedAverage,
 }
 
 /// Arguments of `gems edi`.
@@ -73,6 +75,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         LinearisationArg::Srgb => Linearisation::Srgb,
         LinearisationArg::Gamma => Linearisation::Gamma(args.gamma),
         LinearisationArg::EncodedAverage => Linearisation::EncodedAverage(args.gamma),
+        LinearisationArg::SrgbEncodedAverage => Linearisation::SrgbEncodedAverage,
     };
     let cfg = EdiConfig {
         thresholds: Thresholds {

@@ -37,7 +37,9 @@ pub struct Args {
     /// TOML configuration (missing fields take the defaults; see gems-train's TrainConfig).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    #[arg(long, value_enum, default_value_t = Init::Colmap)]
+    /// Where poses and points come from; the built-in blur-robust SfM by default (the scene
+    /// needs no poses, no sharp images and no COLMAP).
+    #[arg(long, value_enum, default_value_t = Init::Sfm)]
     pub init: Init,
     /// COLMAP model folder for --init colmap (default: the scene's sparse/0).
     #[arg(long)]
@@ -97,9 +99,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("invalid configuration: {e}"))?;
     let init = match (args.events, args.init) {
-        (true, Init::ColmapCli) => Init::ColmapCli,
-        (true, _) => Init::Sfm,
-        (false, init) => init,
+        (true, Init::Colmap | Init::Gt | Init::GtNoisy) => anyhow::bail!(
+            "--events deblurs the images for an initialiser that reads them: use it with --init sfm \
+             (the default) or --init colmap-cli"
+        ),
+        (_, init) => init,
     };
     // With events, the initialiser sees the EDI-deblurred images instead of the blurry ones.
     let init_images = || -> anyhow::Result<PathBuf> {
@@ -116,6 +120,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             translation_std: args.noise_translation,
             rotation_std: args.noise_rotation,
         },
+        // A resumed run keeps the model its checkpoint was initialised from.
+        Init::Sfm | Init::ColmapCli
+            if args.resume && earlier_model(&args.output, init).is_some() =>
+        {
+            InitMode::Colmap(earlier_model(&args.output, init))
+        }
         Init::Sfm => InitMode::Colmap(Some(run_sfm(
             &init_images()?,
             &args.output.join("sfm"),
@@ -143,6 +153,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("report: {}", report.display());
     }
     Ok(())
+}
+
+/// The model an earlier run with the same initialiser wrote into `output`, if any.
+fn earlier_model(output: &Path, init: Init) -> Option<PathBuf> {
+    let dir = match init {
+        Init::Sfm => output.join("sfm"),
+        Init::ColmapCli => output.join("colmap"),
+        Init::Colmap | Init::Gt | Init::GtNoisy => return None,
+    }
+    .join("sparse")
+    .join("0");
+    dir.join("images.bin").is_file().then_some(dir)
 }
 
 /// EDI-deblurs the scene's blurry images with its events into `<output>/edi` (a scene folder)
