@@ -41,6 +41,7 @@ fn no_events_is_bit_exact_identity() {
         Linearisation::Srgb,
         Linearisation::Gamma(2.2),
         Linearisation::EncodedAverage(2.2),
+        Linearisation::SrgbEncodedAverage,
     ] {
         let c = EdiConfig {
             linearisation: lin,
@@ -91,6 +92,73 @@ fn exact_integral_matches_hand_computation() {
         (mean - f64::from(b)).abs() < 2e-3,
         "mean latent {mean} vs blurry {b}"
     );
+}
+
+fn srgb(x: f64) -> f64 {
+    if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+#[test]
+fn srgb_encoded_average_inverts_the_mean_of_srgb_frames_exactly() {
+    // One pixel per row of (c₊, c₋, linear L at the reference): events at 20 (ON), 45 (ON),
+    // 70 (OFF) in [0, 100], reference 50 → E = −2c₊ on [0,20), −c₊ on [20,45), 0 on [45,70),
+    // −c₋ on [70,100]. The blurry value is the time-weighted mean of the sRGB-encoded frames;
+    // the latent must be the sRGB value of L(f) exactly (all frames above the sRGB toe).
+    for (cp, cn, l) in [
+        (0.2f64, 0.2f64, 0.3f64),
+        (0.35, 0.15, 0.05),
+        (0.5, 0.5, 0.8),
+    ] {
+        let ev = EventStream::from_columns(
+            1,
+            1,
+            vec![20, 45, 70],
+            vec![0; 3],
+            vec![0; 3],
+            vec![1, 1, -1],
+        )
+        .unwrap();
+        let pe = PixelEvents::new(ev.as_slice(), 0, 100).unwrap();
+        let segs = [(20.0, -2.0 * cp), (25.0, -cp), (25.0, 0.0), (30.0, -cn)];
+        let b: f64 = segs
+            .iter()
+            .map(|&(d, e)| d * srgb(l * f64::exp(e)))
+            .sum::<f64>()
+            / 100.0;
+        let img = gray(1, 1, vec![b as f32]);
+        let c = EdiConfig {
+            linearisation: Linearisation::SrgbEncodedAverage,
+            ..cfg()
+        };
+        let th = Thresholds {
+            c_pos: cp as f32,
+            c_neg: cn as f32,
+        };
+        let got = f64::from(edi_exact(&img, &pe, 50, th, &c).unwrap().data[0]);
+        assert!(
+            (got - srgb(l)).abs() < 2e-6,
+            "L = {l}: {got} vs {}",
+            srgb(l)
+        );
+        // the γ = 2.2 approximation is measurably off on the same data
+        let approx = EdiConfig {
+            linearisation: Linearisation::EncodedAverage(2.2),
+            ..cfg()
+        };
+        let off = f64::from(edi_exact(&img, &pe, 50, th, &approx).unwrap().data[0]);
+        eprintln!(
+            "L = {l}: exact {got:.6}, γ 2.2 {off:.6}, truth {:.6}",
+            srgb(l)
+        );
+        assert!(
+            (off - srgb(l)).abs() > 20.0 * (got - srgb(l)).abs().max(1e-6),
+            "L = {l}: γ 2.2 gives {off}"
+        );
+    }
 }
 
 #[test]

@@ -71,15 +71,27 @@ pub enum Linearisation {
     /// Values are `linear^(1/γ)`; the blur happened in linear light.
     Gamma(f32),
     /// The blurry image is the mean of *encoded* sharp frames (`value = linear^(1/γ)`), the
-    /// GeMS/BAD-Gaussians/`gems synth` blur model: EDI runs on the stored values with the event
-    /// exponent scaled by 1/γ (log of an encoded value = log(linear)/γ). Use γ = 2.2 for sRGB.
+    /// GeMS/BAD-Gaussians blur model: EDI runs on the stored values with the event exponent
+    /// scaled by 1/γ (log of an encoded value = log(linear)/γ). An approximation for sRGB data;
+    /// prefer [`Linearisation::SrgbEncodedAverage`] there.
     EncodedAverage(f32),
+    /// The blurry image is the mean of **sRGB-encoded** sharp frames while the events saw linear
+    /// light (the `gems synth` and GeMS/BAD-Gaussians formation model). Above its linear toe,
+    /// sRGB is `1.055·x^(1/2.4) − 0.055`, so `B + 0.055 = 1.055·L(f)^(1/2.4)·(1/T)∫exp(E/2.4)`:
+    /// EDI runs on `B + 0.055` with the exponent scaled by 1/2.4 and 0.055 is subtracted again.
+    /// Exact (no γ approximation) wherever the pixel's frames stay above the toe (linear value
+    /// 0.0031, encoded 0.04) and below saturation.
+    SrgbEncodedAverage,
 }
+
+/// Offset `a` of the sRGB curve `(1 + a)·x^(1/2.4) − a`.
+const SRGB_OFFSET: f32 = 0.055;
 
 impl Linearisation {
     fn decode(self, v: f32) -> f32 {
         match self {
             Linearisation::Identity | Linearisation::EncodedAverage(_) => v,
+            Linearisation::SrgbEncodedAverage => v + SRGB_OFFSET,
             Linearisation::Srgb => {
                 if v <= 0.04045 {
                     v / 12.92
@@ -93,6 +105,7 @@ impl Linearisation {
     fn encode(self, v: f32) -> f32 {
         match self {
             Linearisation::Identity | Linearisation::EncodedAverage(_) => v,
+            Linearisation::SrgbEncodedAverage => v - SRGB_OFFSET,
             Linearisation::Srgb => {
                 let v = v.max(0.0);
                 if v <= 0.003_130_8 {
@@ -108,7 +121,8 @@ impl Linearisation {
     fn exponent_scale(self) -> f64 {
         match self {
             Linearisation::EncodedAverage(g) => 1.0 / f64::from(g),
-            _ => 1.0,
+            Linearisation::SrgbEncodedAverage => 1.0 / 2.4,
+            Linearisation::Identity | Linearisation::Srgb | Linearisation::Gamma(_) => 1.0,
         }
     }
 }
@@ -224,8 +238,8 @@ pub fn apply_factors(blurry: &Image, factors: &[f32], cfg: &EdiConfig) -> Image 
                 if g == 1.0 || b >= 1.0 {
                     b
                 } else {
-                    lin.encode((lin.decode(b) * g).clamp(0.0, upper.max(0.0)))
-                        .clamp(0.0, upper)
+                    // negative light is impossible; the final clamp is in stored values
+                    lin.encode((lin.decode(b) * g).max(0.0)).clamp(0.0, upper)
                 }
             })
         })
