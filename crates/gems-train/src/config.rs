@@ -135,11 +135,11 @@ pub struct InitConfig {
     /// Initial scale = this × RMS distance to the `knn` nearest neighbours.
     pub scale_factor: f32,
     pub knn: usize,
-    /// Number of points for random initialisation (no SfM points).
+    /// Number of points for random initialisation (no SfM points); at most `mcmc.cap_max`.
     pub random_points: usize,
     /// An SfM cloud sparser than this is topped up with random points inside the camera
     /// frustums, at the depths its points occupy (blurry images give sparse clouds, and MCMC
-    /// grows a set by only 5 % per refinement).
+    /// grows a set by only 5 % per refinement); at most `mcmc.cap_max`.
     pub min_points: usize,
     /// Depth range (in units of the scene scale) of random points inside the camera frustums.
     pub random_near: f32,

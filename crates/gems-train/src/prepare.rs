@@ -274,6 +274,11 @@ pub fn prepare_input(
         .iter()
         .map(|v| camera_from_c2w(&v.c2w_init, &v.intrinsics))
         .collect();
+    // MCMC never removes Gaussians, so an initial cloud above its cap would stay above it.
+    let (min_points, random_points) = (
+        cfg.init.min_points.min(cfg.mcmc.cap_max),
+        cfg.init.random_points.min(cfg.mcmc.cap_max),
+    );
     let (points, colors) = match model.as_ref().map(read_points) {
         Some((p, c)) if p.len() >= 2 => {
             let mut p: Vec<[f32; 3]> = p
@@ -284,12 +289,12 @@ pub fn prepare_input(
                 })
                 .collect();
             let mut c = c;
-            if p.len() < cfg.init.min_points {
+            if p.len() < min_points {
                 let (near, far) = depth_range(&p, &cams).unwrap_or((
                     cfg.init.random_near * scene_scale,
                     cfg.init.random_far * scene_scale,
                 ));
-                let extra = cfg.init.min_points - p.len();
+                let extra = min_points - p.len();
                 tracing::info!(
                     sfm_points = p.len(),
                     extra,
@@ -308,7 +313,7 @@ pub fn prepare_input(
                 cfg.init.random_near * scene_scale,
                 cfg.init.random_far * scene_scale,
             );
-            random_in_frustums(&cams, cfg.init.random_points, near, far, &mut rng)?
+            random_in_frustums(&cams, random_points, near, far, &mut rng)?
         }
     };
     let gaussians = from_points(&points, &colors, &cfg.init, cfg.sh_degree, &mut rng)?;

@@ -86,3 +86,28 @@ fn synth_scene_prepares_normalises_and_trains() {
     let orig = out.gaussians.means[0];
     assert!((back.x - orig[0] as f64).abs() < 1e-4 && (back.z - orig[2] as f64).abs() < 1e-4);
 }
+
+#[test]
+fn initial_clouds_never_exceed_the_mcmc_cap() {
+    let dir = tempfile::tempdir().unwrap();
+    gems_synth::generate(&gems_synth::SynthConfig::tiny(), dir.path()).unwrap();
+    let scene = gems_data::open_scene(dir.path(), &OpenOptions::default()).unwrap();
+    // The ground-truth model without its points: initialisation falls back to random points.
+    let mut model = gems_data::colmap::read_model(&dir.path().join("gt/sparse/0")).unwrap();
+    model.points.clear();
+    model.images.iter_mut().for_each(|i| i.points2d.clear());
+    let bare = dir.path().join("bare");
+    gems_data::colmap::write_model(&bare, &model, gems_data::colmap::ModelFormat::Binary).unwrap();
+    let mut cfg = TrainConfig::default();
+    cfg.mcmc.cap_max = 700;
+    let input = prepare_input(&scene, &InitMode::Colmap(Some(bare.clone())), &cfg).unwrap();
+    assert_eq!(input.gaussians.len(), 700, "random init clamped to cap_max");
+    cfg.mcmc.cap_max = 500_000;
+    cfg.init.random_points = 900;
+    let input = prepare_input(&scene, &InitMode::Colmap(Some(bare)), &cfg).unwrap();
+    assert_eq!(
+        input.gaussians.len(),
+        900,
+        "below the cap the configured count"
+    );
+}
