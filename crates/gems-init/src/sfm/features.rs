@@ -118,6 +118,86 @@ pub(crate) fn exact_scale(width: u32, target: f64) -> f64 {
     w / width as f64
 }
 
+/// Long side of the reduced image [`estimate_blur_px`] works on.
+const BLUR_EST_SIDE: f32 = 120.0;
+
+/// Motion-blur length of an image in its own pixels, 0 when no blur is detected.
+///
+/// A motion-blurred image is the sharp image convolved with the path kernel; its derivative along
+/// the blur direction is dominated by the kernel's two ends, so the autocorrelation of that
+/// directional derivative has a negative lobe at a lag equal to the path length (Yitzhaky &
+/// Kopeika). Derivatives along a direction ignore edges parallel to it, so long straight edges do
+/// not pass for blur. The direction with the deepest lobe (below −0.05) gives the length.
+pub(crate) fn estimate_blur_px(img: &Gray) -> f32 {
+    let long = img.w.max(img.h) as f32;
+    let scale = (BLUR_EST_SIDE / long).min(1.0);
+    let g = img.resized(scale).gaussian(0.7);
+    let (w, h) = (g.w, g.h);
+    if w < 16 || h < 16 {
+        return 0.0;
+    }
+    let mut gx = vec![0.0f32; w * h];
+    let mut gy = vec![0.0f32; w * h];
+    for y in 1..h - 1 {
+        for x in 1..w - 1 {
+            gx[y * w + x] = 0.5 * (g.at(x + 1, y) - g.at(x - 1, y));
+            gy[y * w + x] = 0.5 * (g.at(x, y + 1) - g.at(x, y - 1));
+        }
+    }
+    let max_lag = (w.min(h) / 3).max(4);
+    let dirs = 12;
+    let best = (0..dirs)
+        .into_par_iter()
+        .map(|k| {
+            let th = std::f32::consts::PI * k as f32 / dirs as f32;
+            let (c, s) = (th.cos(), th.sin());
+            let d = Gray {
+                w,
+                h,
+                data: gx.iter().zip(&gy).map(|(a, b)| c * a + s * b).collect(),
+            };
+            // Normalised autocorrelation at integer lags along (c, s), over the pixels whose
+            // shifted partner stays inside the image.
+            let mut min = (0.0f32, 0usize);
+            let m = max_lag as f32;
+            let (x0, x1) = (1 + (m * c.min(0.0)).abs().ceil() as usize, w - 1);
+            let x1 = x1.saturating_sub((m * c.max(0.0)).ceil() as usize + 1);
+            let (y0, y1) = (1usize, h - 1 - (m * s).ceil() as usize - 1);
+            if x1 <= x0 + 4 || y1 <= y0 + 4 {
+                return min;
+            }
+            let mut e0 = 0.0f32;
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    e0 += d.at(x, y) * d.at(x, y);
+                }
+            }
+            if e0 <= 1e-12 {
+                return min;
+            }
+            for lag in 2..=max_lag {
+                let (ox, oy) = (c * lag as f32, s * lag as f32);
+                let mut acc = 0.0f32;
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        acc += d.at(x, y) * d.sample(x as f32 + 0.5 + ox, y as f32 + 0.5 + oy);
+                    }
+                }
+                let a = acc / e0;
+                if a < min.0 {
+                    min = (a, lag);
+                }
+            }
+            min
+        })
+        .reduce(|| (0.0f32, 0usize), |a, b| if b.0 < a.0 { b } else { a });
+    if best.0 > -0.05 {
+        0.0
+    } else {
+        best.1 as f32 / scale
+    }
+}
+
 /// Keypoints and descriptors of one image at the working level. `desc` is structure-of-arrays:
 /// keypoint `k` owns `desc[k*DESC_LEN..(k+1)*DESC_LEN]`.
 #[derive(Clone, Debug, Default)]

@@ -27,6 +27,7 @@ pub mod ba;
 mod colmap_cli;
 pub mod features;
 pub mod geometry;
+mod global;
 mod incremental;
 mod output;
 mod tracking;
@@ -41,6 +42,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
+
+/// Motion blur, in working-level pixels, that the first working size tried aims at.
+const TARGET_BLUR_PX: f64 = 10.0;
 
 /// One input image with the name it will carry in the COLMAP model.
 #[derive(Clone, Debug)]
@@ -67,6 +71,14 @@ pub struct SfmOptions {
     pub max_reproj_px: f64,
     /// Minimum triangulation angle of a new point, degrees.
     pub min_tri_angle_deg: f64,
+    /// Spacing of the dense grid of extra tracking query points, as a fraction of the working
+    /// level's long side (0 disables the grid and tracks keypoints only).
+    pub grid_spacing_frac: f32,
+    /// Best-overlapping views each view's points are tracked into.
+    pub track_neighbours: usize,
+    /// After the incremental reconstruction, also re-initialise it from averaged rotations and
+    /// jointly solved positions, and keep that when it fits better.
+    pub global_restart: bool,
     /// Seed of every random choice (RANSAC); same seed, same result.
     pub seed: u64,
 }
@@ -76,11 +88,14 @@ impl Default for SfmOptions {
         SfmOptions {
             focal_px: None,
             focal_candidates: vec![0.6, 0.75, 0.9, 1.1, 1.35, 1.7],
-            working_sizes: vec![192, 128, 96],
+            working_sizes: vec![192, 128, 96, 64],
             max_features: 500,
             min_pair_inliers: 20,
             max_reproj_px: 2.0,
             min_tri_angle_deg: 1.0,
+            grid_spacing_frac: 0.04,
+            track_neighbours: 8,
+            global_restart: true,
             seed: 0,
         }
     }
@@ -189,6 +204,9 @@ pub struct SfmStats {
     /// Seconds spent in feature extraction + matching, and in reconstruction.
     pub seconds_features: f64,
     pub seconds_reconstruction: f64,
+    /// Median motion-blur length estimated from the images (full-resolution px), which orders
+    /// the working sizes tried.
+    pub blur_px_estimate: f64,
 }
 
 /// The reconstruction: camera, views (in input order), points, diagnostics.
@@ -271,11 +289,28 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         .collect();
     check_identical(images, &grays)?;
 
+    // The working size where the blur is about TARGET_BLUR_PX is tried first, then the others by
+    // distance (in scale) from it: too fine a level leaves long smears that bias matching and let
+    // the camera path bend, too coarse a level leaves too few pixels.
+    let mut blurs: Vec<f32> = grays.par_iter().map(features::estimate_blur_px).collect();
+    blurs.sort_by(|a, b| a.total_cmp(b));
+    let blur = blurs[blurs.len() / 2] as f64;
+    let target_ws = if blur > 0.0 {
+        long * TARGET_BLUR_PX / blur
+    } else {
+        f64::INFINITY
+    };
+    let mut sizes = opts.working_sizes.clone();
+    sizes.sort_by(|&a, &b| {
+        let d = |s: u32| (s as f64 / target_ws).ln().abs();
+        d(a).total_cmp(&d(b)).then(b.cmp(&a))
+    });
+    tracing::info!(blur_px = blur, working_sizes = ?sizes, "estimated motion blur");
     let mut best: Option<(incremental::Recon, u32, f64)> = None;
     let mut t_feat = 0.0;
     let mut t_rec = 0.0;
     let mut textureless: Option<Vec<String>> = None;
-    for &ws in &opts.working_sizes {
+    for &ws in &sizes {
         let tf = Instant::now();
         let scale = features::exact_scale(w, ws as f64 / long);
         let work: Vec<Gray> = grays.par_iter().map(|g| g.resized(scale as f32)).collect();
@@ -386,6 +421,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     result.stats.seconds = t0.elapsed().as_secs_f64();
     result.stats.seconds_features = t_feat;
     result.stats.seconds_reconstruction = t_rec;
+    result.stats.blur_px_estimate = blur;
     if result.stats.registered < 2 {
         return Err(SfmError::TooFewRegistered {
             registered: result.stats.registered,
@@ -572,7 +608,7 @@ fn all_tracks(
         // Large patches: at extreme blur only coarse structure is distinctive.
         half: ((wl * 0.09).round() as i32).clamp(4, 10),
         radius: ((wl * 0.07).round() as i32).clamp(5, 20),
-        neighbours: 4,
+        neighbours: opts.track_neighbours,
         min_ncc: 0.75,
         min_margin: 0.01,
         fb_tol: 1.0,
@@ -586,7 +622,13 @@ fn all_tracks(
         let mut nb: Vec<usize> = (0..n).filter(|&j| j != i && ov[i][j].score > 0.2).collect();
         nb.sort_by(|&a, &b| ov[i][b].score.total_cmp(&ov[i][a].score).then(a.cmp(&b)));
         nb.truncate(tp.neighbours);
-        let pts = &feats[i].xy;
+        let mut pts = feats[i].xy.clone();
+        if opts.grid_spacing_frac > 0.0 {
+            let spacing = ((wl * opts.grid_spacing_frac).round() as usize).max(2);
+            let grid = tracking::grid_points(&smooth[i].img, tp.half, spacing, 0.1, &pts);
+            pts.extend(grid);
+        }
+        let pts = &pts;
         let mut root: Vec<incremental::Track> = pts
             .iter()
             .map(|p| incremental::Track {
@@ -599,7 +641,35 @@ fn all_tracks(
             })
             .collect();
         for &j in &nb {
-            let found = tracking::track_points(&smooth[i], &smooth[j], pts, ov[i][j].shift, &tp);
+            // Chained prediction: each point is searched for from the view of its track that
+            // overlaps j best (a near neighbour of j rather than the root), so tracks reach views
+            // whose shift from the root is beyond the search radius and stay long, which is what
+            // ties distant views together and keeps the camera path from bending.
+            let mut found: Vec<Option<[f32; 2]>> = vec![None; pts.len()];
+            let mut by_src: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+            for (k, t) in root.iter().enumerate() {
+                let src = t
+                    .obs
+                    .iter()
+                    .map(|o| o.view)
+                    .max_by(|&a, &b| ov[a][j].score.total_cmp(&ov[b][j].score).then(b.cmp(&a)))
+                    .expect("root observation");
+                by_src.entry(src).or_default().push(k);
+            }
+            for (src, ks) in by_src {
+                let from: Vec<[f32; 2]> = ks
+                    .iter()
+                    .map(|&k| {
+                        let o = root[k].obs.iter().find(|o| o.view == src).expect("source");
+                        [o.xy.x as f32, o.xy.y as f32]
+                    })
+                    .collect();
+                let f =
+                    tracking::track_points(&smooth[src], &smooth[j], &from, ov[src][j].shift, &tp);
+                for (&k, q) in ks.iter().zip(f) {
+                    found[k] = q;
+                }
+            }
             let idx: Vec<usize> = (0..pts.len()).filter(|&k| found[k].is_some()).collect();
             if idx.len() < opts.min_pair_inliers {
                 continue;

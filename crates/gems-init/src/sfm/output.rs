@@ -119,6 +119,7 @@ pub(crate) fn assemble(
         focal_from_metadata,
         seconds_features: 0.0,
         seconds_reconstruction: 0.0,
+        blur_px_estimate: 0.0,
     };
     SfmResult {
         camera,

@@ -333,6 +333,89 @@ fn refine_lk(img: &Gray, start: [f32; 2], half: i32, tmpl: &[f32]) -> Option<[f3
     Some(q)
 }
 
+/// Dense query points for tracking: the centres of a grid with `spacing` px whose tracking patch
+/// (side 2·half+1) is well conditioned — the smaller eigenvalue of the gradient structure tensor
+/// summed over the patch is at least `min_rel` of the 90th percentile over the grid — and that
+/// lie at least `spacing`/2 from every point of `existing`. Corners are rare under heavy blur,
+/// but a large patch of a blurred image is usually still trackable in two directions.
+pub(crate) fn grid_points(
+    img: &Gray,
+    half: i32,
+    spacing: usize,
+    min_rel: f32,
+    existing: &[[f32; 2]],
+) -> Vec<[f32; 2]> {
+    let (w, h) = (img.w, img.h);
+    let hs = half as usize + 1;
+    if w <= 2 * hs + 2 || h <= 2 * hs + 2 || spacing == 0 {
+        return Vec::new();
+    }
+    // Integral images of gx², gy², gx·gy (central differences, zero at the border).
+    let w1 = w + 1;
+    let mut ixx = vec![0.0f64; w1 * (h + 1)];
+    let mut iyy = vec![0.0f64; w1 * (h + 1)];
+    let mut ixy = vec![0.0f64; w1 * (h + 1)];
+    for y in 0..h {
+        let (mut rxx, mut ryy, mut rxy) = (0.0f64, 0.0f64, 0.0f64);
+        for x in 0..w {
+            let (gx, gy) = if x > 0 && x + 1 < w && y > 0 && y + 1 < h {
+                (
+                    0.5 * (img.data[y * w + x + 1] - img.data[y * w + x - 1]) as f64,
+                    0.5 * (img.data[(y + 1) * w + x] - img.data[(y - 1) * w + x]) as f64,
+                )
+            } else {
+                (0.0, 0.0)
+            };
+            rxx += gx * gx;
+            ryy += gy * gy;
+            rxy += gx * gy;
+            let i = (y + 1) * w1 + x + 1;
+            ixx[i] = ixx[y * w1 + x + 1] + rxx;
+            iyy[i] = iyy[y * w1 + x + 1] + ryy;
+            ixy[i] = ixy[y * w1 + x + 1] + rxy;
+        }
+    }
+    let boxed = |t: &[f64], x0: usize, y0: usize, x1: usize, y1: usize| {
+        t[(y1 + 1) * w1 + x1 + 1] - t[y0 * w1 + x1 + 1] - t[(y1 + 1) * w1 + x0] + t[y0 * w1 + x0]
+    };
+    let hu = half as usize;
+    let mut cands: Vec<([f32; 2], f64)> = Vec::new();
+    let mut y = hs + spacing / 2;
+    while y + hs < h {
+        let mut x = hs + spacing / 2;
+        while x + hs < w {
+            let (x0, y0, x1, y1) = (x - hu, y - hu, x + hu, y + hu);
+            let a = boxed(&ixx, x0, y0, x1, y1);
+            let c = boxed(&iyy, x0, y0, x1, y1);
+            let b = boxed(&ixy, x0, y0, x1, y1);
+            let lmin = 0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt();
+            cands.push(([x as f32 + 0.5, y as f32 + 0.5], lmin));
+            x += spacing;
+        }
+        y += spacing;
+    }
+    if cands.is_empty() {
+        return Vec::new();
+    }
+    let mut sorted: Vec<f64> = cands.iter().map(|c| c.1).collect();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let p90 = sorted[(sorted.len() * 9 / 10).min(sorted.len() - 1)];
+    if p90 <= 1e-12 {
+        return Vec::new();
+    }
+    let min_d2 = (spacing as f32 * 0.5).powi(2);
+    cands
+        .into_iter()
+        .filter(|(p, l)| {
+            *l >= min_rel as f64 * p90
+                && existing
+                    .iter()
+                    .all(|q| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) >= min_d2)
+        })
+        .map(|(p, _)| p)
+        .collect()
+}
+
 /// Track `pts` of `src` into `dst` (predicted at pts + shift). Returns, per point, the position
 /// in `dst` when forward–backward consistent.
 pub(crate) fn track_points(
