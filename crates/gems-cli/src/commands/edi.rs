@@ -65,6 +65,10 @@ pub struct Args {
     /// Upper clamp of the output.
     #[arg(long, default_value_t = 1.0)]
     pub upper_clamp: f32,
+    /// The blurry images are the mean of N equally spaced sharp sub-frames (both exposure ends
+    /// included), e.g. `gems synth`'s sub-frame count; default: a continuous exposure.
+    #[arg(long)]
+    pub exposure_samples: Option<usize>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -98,6 +102,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         linearisation,
         upper_clamp: args.upper_clamp,
         bayer: None,
+        exposure_samples: args.exposure_samples,
     };
     let edi = deblur_scene(&scene, &cfg)?;
     write_edi_scene(&scene, &edi, &args.output)?;

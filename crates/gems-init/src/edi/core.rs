@@ -178,26 +178,58 @@ fn step(p: i8, c_pos: f64, c_neg: f64) -> f64 {
     if p > 0 { c_pos } else { -c_neg }
 }
 
+/// `E_t0(f)`: the exponent at `f` relative to the window start (events at or before `f`).
+#[inline]
+fn level_at(t: &[i64], p: &[i8], f: i64, (c_pos, c_neg): (f64, f64)) -> f64 {
+    t.iter()
+        .zip(p)
+        .take_while(|&(&ti, _)| ti <= f)
+        .map(|(_, &pi)| step(pi, c_pos, c_neg))
+        .sum()
+}
+
 /// Exact `J(f) = (1/T)·∫ exp(E_f(t)) dt` over the window for one pixel (piecewise-constant sum).
 #[inline]
-fn exact_j(t: &[i64], p: &[i8], t0: i64, t1: i64, f: i64, c_pos: f64, c_neg: f64) -> f64 {
-    // E relative to t0 at f, so that E_f(t) = E_t0(t) − E_t0(f)
-    let e_f: f64 = t
-        .iter()
-        .zip(p)
-        .filter(|&(&ti, _)| ti <= f)
-        .map(|(_, &pi)| step(pi, c_pos, c_neg))
-        .sum();
-    let mut e = -e_f;
+fn exact_j(t: &[i64], p: &[i8], (t0, t1): (i64, i64), f: i64, c: (f64, f64)) -> f64 {
+    // E_f(t) = E_t0(t) − E_t0(f)
+    let mut e = -level_at(t, p, f, c);
     let mut prev = t0;
     let mut acc = 0.0;
     for (&ti, &pi) in t.iter().zip(p) {
         acc += (ti - prev) as f64 * e.exp();
-        e += step(pi, c_pos, c_neg);
+        e += step(pi, c.0, c.1);
         prev = ti;
     }
     acc += (t1 - prev) as f64 * e.exp();
     acc / (t1 - t0) as f64
+}
+
+/// `J(f) = (1/N)·Σ_k exp(E_f(t_k))` over `N ≥ 2` instants `t_k = t0 + k·T/(N−1)` (both ends
+/// included): the exposure of a blurry image that is the mean of N sharp sub-frames.
+#[inline]
+fn sampled_j(
+    t: &[i64],
+    p: &[i8],
+    (t0, t1): (i64, i64),
+    f: i64,
+    c: (f64, f64),
+    samples: usize,
+) -> f64 {
+    let e_f = level_at(t, p, f, c);
+    // one walk over the events, advancing to each (increasing) instant in turn
+    let (mut i, mut e) = (0usize, 0.0);
+    let span = i128::from(t1 - t0);
+    let n = samples as i128;
+    let mut acc = 0.0;
+    for k in 0..n {
+        let at = t0 + (span * k / (n - 1)) as i64;
+        while i < t.len() && t[i] <= at {
+            e += step(p[i], c.0, c.1);
+            i += 1;
+        }
+        acc += (e - e_f).exp();
+    }
+    acc / samples as f64
 }
 
 /// Per-pixel factors `1/J(f)` of the exact EDI at time `f` (so `L(f) = B/J(f)`); pixels without
@@ -205,8 +237,31 @@ fn exact_j(t: &[i64], p: &[i8], t0: i64, t1: i64, f: i64, c_pos: f64, c_neg: f64
 /// same latent frame as `L(f)·exp(E_f(t))`. `c_pos`/`c_neg` are the exponents in the image's value
 /// domain.
 pub fn exact_factors(pe: &PixelEvents, f: i64, c_pos: f64, c_neg: f64) -> Vec<f32> {
+    latent_factors(pe, f, (c_pos, c_neg), None)
+}
+
+/// [`exact_factors`] for a blurry image that is the mean of `samples` equally spaced sharp
+/// sub-frames (both exposure ends included, as `gems synth` and the GeMS/BAD-Gaussians virtual
+/// cameras form it) instead of a continuous exposure: `J(f) = (1/N)·Σ_k exp(E_f(t_k))`.
+pub fn sampled_factors(
+    pe: &PixelEvents,
+    f: i64,
+    c_pos: f64,
+    c_neg: f64,
+    samples: usize,
+) -> Vec<f32> {
+    latent_factors(pe, f, (c_pos, c_neg), Some(samples))
+}
+
+/// The factors `1/J(f)` of a continuous (`samples = None`) or sampled exposure.
+pub(crate) fn latent_factors(
+    pe: &PixelEvents,
+    f: i64,
+    c: (f64, f64),
+    samples: Option<usize>,
+) -> Vec<f32> {
     let n = pe.width * pe.height;
-    let (t0, t1) = (pe.t0, pe.t1);
+    let window = (pe.t0, pe.t1);
     (0..n)
         .into_par_iter()
         .with_min_len(4096)
@@ -215,7 +270,11 @@ pub fn exact_factors(pe: &PixelEvents, f: i64, c_pos: f64, c_neg: f64) -> Vec<f3
             if t.is_empty() {
                 return 1.0;
             }
-            (1.0 / exact_j(t, p, t0, t1, f, c_pos, c_neg).max(1e-8)) as f32
+            let j = match samples {
+                Some(s) if s >= 2 => sampled_j(t, p, window, f, c, s),
+                _ => exact_j(t, p, window, f, c),
+            };
+            (1.0 / j.max(1e-8)) as f32
         })
         .collect()
 }

@@ -35,9 +35,15 @@ mod core;
 mod scene;
 mod search;
 
-pub use core::{Image, PixelEvents, binned_factors, exact_factors, on_off_from_signed};
+use core::latent_factors;
+pub use core::{
+    Image, PixelEvents, binned_factors, exact_factors, on_off_from_signed, sampled_factors,
+};
 pub use scene::{EdiScene, EdiView, deblur_scene, write_edi_scene};
-pub use search::{SearchConfig, estimate_thresholds, event_edges, minimise, sharpness_energy};
+pub use search::{
+    SearchConfig, SearchEnergy, estimate_thresholds, event_edges, minimise, normalised_sparsity,
+    sharpness_energy,
+};
 
 /// Errors of the EDI stage.
 #[derive(Debug, thiserror::Error)]
@@ -102,7 +108,7 @@ impl Linearisation {
             Linearisation::Gamma(g) => v.max(0.0).powf(g),
         }
     }
-    fn encode(self, v: f32) -> f32 {
+    pub(crate) fn encode(self, v: f32) -> f32 {
         match self {
             Linearisation::Identity | Linearisation::EncodedAverage(_) => v,
             Linearisation::SrgbEncodedAverage => v - SRGB_OFFSET,
@@ -207,6 +213,11 @@ pub struct EdiConfig {
     pub upper_clamp: f32,
     /// Treat single-channel input as a raw Bayer mosaic of this layout (demosaic after EDI).
     pub bayer: Option<BayerPattern>,
+    /// `Some(N)`: the blurry image is the mean of N equally spaced sharp sub-frames, both
+    /// exposure ends included (`gems synth`: N = its `subframes`; the GeMS/BAD-Gaussians virtual
+    /// cameras), so [`EdiMode::Exact`] and the threshold search use `J = (1/N)·Σ_k exp(E(t_k))`.
+    /// `None` (default): a continuous exposure, the exact integral.
+    pub exposure_samples: Option<usize>,
 }
 
 impl Default for EdiConfig {
@@ -219,6 +230,7 @@ impl Default for EdiConfig {
             linearisation: Linearisation::Identity,
             upper_clamp: 1.0,
             bayer: None,
+            exposure_samples: None,
         }
     }
 }
@@ -317,7 +329,8 @@ pub fn edi_exact(
 ) -> Result<Image, EdiError> {
     check_sizes(blurry, pe)?;
     let s = cfg.linearisation.exponent_scale();
-    let g = exact_factors(pe, at, f64::from(th.c_pos) * s, f64::from(th.c_neg) * s);
+    let c = (f64::from(th.c_pos) * s, f64::from(th.c_neg) * s);
+    let g = latent_factors(pe, at, c, cfg.exposure_samples);
     Ok(finish(apply_factors(blurry, &g, cfg), cfg))
 }
 

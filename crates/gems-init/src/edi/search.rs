@@ -1,20 +1,41 @@
-//! Contrast-threshold estimation by minimising a sharpness energy (events.md §1.4).
+//! Contrast-threshold estimation by minimising a sharpness energy of the EDI latent frame.
 //!
-//! Energy of a candidate latent L (gray): `λ·Σ|∇L| − Σ edge(L)·edge(M)`, with |∇| the 3×3 Sobel
-//! magnitude, edge(·) the Sobel magnitude min-max normalised to [0, 1] and binarised at
-//! `m + (1 − m)/3` (m = its mean), and M the signed event map of the window (events before the
-//! reference time counted negatively). A wrong c leaves ghost copies of every moving edge (too
-//! small: residual blur; too large: overshoot), which raises the total variation.
+//! EDI explains every pixel's blurry value exactly for any threshold c, so c can only be told
+//! from the *spatial* structure of the latent frame `L_c(f)`. A wrong c leaves a ghost of every
+//! moving edge over the pixels the edge swept: to first order `log L_c = log L + (c_true − c)·A`
+//! with `A` the pixel's mean event count relative to f — a smooth ramp along the motion for c too
+//! small (residual blur) and an overshoot for c too large.
+//!
+//! **Default energy, [`SearchEnergy::NormalisedSparsity`]:** `‖∇L‖₁ / ‖∇L‖₂` of the gray latent
+//! (Rec. 709 luma) in the sRGB-encoded domain (Krishnan et al. 2011; natural-image statistics
+//! are defined on encoded values). Being scale-invariant, it does not reward the darkening or
+//! flattening a wrong c brings, and since a ramp spreads an edge's gradient over many pixels
+//! (ℓ₁/ℓ₂ grows like √width) it is raised by residual blur and by overshoot ghosts alike, while
+//! a total variation cannot tell a ramp from a step.
+//!
+//! **Published energy, [`SearchEnergy::TvEdges`]** (EDI authors, davis-EDI-rs, ev-thresh-est;
+//! events.md §1.4): `λ·Σ|∇L| − Σ edge(L)·edge(M)` with Sobel magnitudes, edge(·) binarised at
+//! `m + (1 − m)/3` of the min-max normalised magnitude, M the signed event map. Kept for
+//! comparison: on our synthetic data it decreases monotonically towards small c (TV does not see
+//! residual blur), so the search returns the lower end of the range.
 //!
 //! Search: the energy is evaluated on a coarse grid over `[lo, hi]`, then refined by golden-section
 //! search in the grid cell around the best point (robust to the energy's small plateaus).
-//!
-//! **Limitation (measured):** on our synthetic moving-texture data (smooth texture, 16 px blur,
-//! events simulated with c = 0.2 or 0.35, no noise) this published energy decreases monotonically
-//! towards small c, so the search returns the lower bound of the range instead of the simulator's
-//! threshold. Use known thresholds when they are available (synthetic data, calibrated sensors).
 
-use super::{EdiConfig, Image, PixelEvents, Thresholds, apply_factors, exact_factors};
+use super::core::latent_factors;
+use super::{EdiConfig, Image, Linearisation, PixelEvents, Thresholds, apply_factors};
+
+/// Which sharpness energy the threshold search minimises.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SearchEnergy {
+    /// `‖∇L‖₁/‖∇L‖₂` of the gray latent in the sRGB-encoded domain (default).
+    NormalisedSparsity,
+    /// The published `λ·TV(L) − Σ edge(L)·edge(M)` with TV weight λ (0.15 in davis-EDI-rs).
+    TvEdges {
+        /// TV weight λ.
+        tv_weight: f32,
+    },
+}
 
 /// Settings of the threshold search.
 #[derive(Debug, Clone, PartialEq)]
@@ -25,8 +46,8 @@ pub struct SearchConfig {
     pub grid: usize,
     /// Golden-section iterations after the grid.
     pub refine: usize,
-    /// TV weight λ (0.15 as in davis-EDI-rs / ev-thresh-est).
-    pub tv_weight: f32,
+    /// The energy minimised.
+    pub energy: SearchEnergy,
     /// Estimate c₊ and c₋ separately (after a common estimate).
     pub separate: bool,
     /// One estimate per view (else one for the whole scene).
@@ -39,7 +60,7 @@ impl Default for SearchConfig {
             range: (0.1, 0.5),
             grid: 17,
             refine: 12,
-            tv_weight: 0.15,
+            energy: SearchEnergy::NormalisedSparsity,
             separate: false,
             per_view: false,
         }
@@ -89,7 +110,8 @@ pub fn event_edges(signed_map: &[f32], w: usize, h: usize) -> Vec<f32> {
     binary_edges(&sobel(signed_map, w, h))
 }
 
-/// The sharpness energy of a gray latent image given the binarised event edge map.
+/// The published sharpness energy ([`SearchEnergy::TvEdges`]) of a gray latent image given the
+/// binarised event edge map.
 pub fn sharpness_energy(
     gray: &[f32],
     w: usize,
@@ -108,16 +130,95 @@ pub fn sharpness_energy(
     f64::from(tv_weight) * tv - agree
 }
 
+/// Normalised sparsity `‖∇g‖₁ / ‖∇g‖₂` of a `w × h` image (forward differences, anisotropic ℓ₁)
+/// over the pixels where `mask` is true (all pixels without a mask); 0 for a constant image.
+pub fn normalised_sparsity(g: &[f32], w: usize, h: usize, mask: Option<&[bool]>) -> f64 {
+    let (mut l1, mut l2) = (0f64, 0f64);
+    for y in 0..h {
+        for x in 0..w {
+            if mask.is_some_and(|m| !m[y * w + x]) {
+                continue;
+            }
+            let v = g[y * w + x];
+            let dx = if x + 1 < w { g[y * w + x + 1] - v } else { 0.0 };
+            let dy = if y + 1 < h {
+                g[(y + 1) * w + x] - v
+            } else {
+                0.0
+            };
+            l1 += f64::from(dx.abs() + dy.abs());
+            l2 += f64::from(dx * dx + dy * dy);
+        }
+    }
+    if l2 > 0.0 { l1 / l2.sqrt() } else { 0.0 }
+}
+
+/// Gray (Rec. 709 luma of RGB) of a latent frame in the sRGB-encoded domain, the domain the
+/// normalised-sparsity prior is evaluated in whatever the stored encoding.
+fn encoded_gray(img: &Image, lin: Linearisation) -> Vec<f32> {
+    let to_enc = |v: f32| -> f32 {
+        match lin {
+            Linearisation::Srgb | Linearisation::SrgbEncodedAverage => v,
+            _ => Linearisation::Srgb.encode(match lin {
+                Linearisation::Gamma(g) | Linearisation::EncodedAverage(g) => v.max(0.0).powf(g),
+                _ => v,
+            }),
+        }
+    };
+    let c = img.channels;
+    img.data
+        .chunks_exact(c)
+        .map(|p| {
+            let v = if c == 3 {
+                0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]
+            } else {
+                p.iter().sum::<f32>() / c as f32
+            };
+            to_enc(v)
+        })
+        .collect()
+}
+
+/// Events a pixel (or one of its 8 neighbours) must have for the normalised sparsity to look
+/// at it: edges that fired only one or two events carry the largest relative quantisation error
+/// (an edge of contrast Δ fires ⌊Δ/c⌋ events), so they would pull the estimate upwards.
+const MIN_EVENTS: usize = 3;
+
+/// Coordinate-descent rounds (c₊ then c₋) of the separate estimate.
+const SEPARATE_ROUNDS: usize = 3;
+
+/// Pixels with at least [`MIN_EVENTS`] events in their 3×3 neighbourhood (`None` when there are
+/// none: then every pixel counts).
+fn busy_pixels(pe: &PixelEvents) -> Option<Vec<bool>> {
+    let (w, h) = (pe.width(), pe.height());
+    let busy: Vec<bool> = (0..w * h)
+        .map(|k| pe.pixel(k).0.len() >= MIN_EVENTS)
+        .collect();
+    let mask: Vec<bool> = (0..w * h)
+        .map(|k| {
+            let (x, y) = (k % w, k / w);
+            (y.saturating_sub(1)..(y + 2).min(h))
+                .any(|yy| (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| busy[yy * w + xx]))
+        })
+        .collect();
+    mask.iter().any(|&m| m).then_some(mask)
+}
+
 /// One view prepared for the search.
 struct Prepared<'a> {
     blurry: &'a Image,
     pe: &'a PixelEvents,
     at: i64,
+    /// Binarised event edges ([`SearchEnergy::TvEdges`]).
     event_edges: Vec<f32>,
+    /// Pixels the normalised sparsity looks at ([`SearchEnergy::NormalisedSparsity`]).
+    mask: Option<Vec<bool>>,
 }
 
-/// Estimates thresholds from views `(blurry, events, reference time)`; all views share one result
-/// (call once per view for per-view estimates). The energies of the views are summed.
+/// Estimates thresholds from views `(blurry, events, reference time)` by minimising
+/// `search.energy` of the exact EDI latent at the reference time; all views share one result
+/// (call once per view for per-view estimates) and their energies are summed. With
+/// `search.separate`, c₊ and then c₋ are refined one at a time after the common estimate.
 pub fn estimate_thresholds(
     views: &[(&Image, &PixelEvents, i64)],
     search: &SearchConfig,
@@ -125,37 +226,56 @@ pub fn estimate_thresholds(
 ) -> Thresholds {
     let prepared: Vec<Prepared<'_>> = views
         .iter()
-        .map(|&(blurry, pe, at)| {
-            let m = pe.signed_map(at);
-            let mag = sobel(
-                &m.iter().map(|v| v.abs()).collect::<Vec<_>>(),
-                pe.width(),
-                pe.height(),
-            );
-            Prepared {
-                blurry,
-                pe,
-                at,
-                event_edges: binary_edges(&mag),
-            }
+        .map(|&(blurry, pe, at)| Prepared {
+            blurry,
+            pe,
+            at,
+            event_edges: match search.energy {
+                SearchEnergy::TvEdges { .. } => {
+                    let m = pe.signed_map(at);
+                    let mag = sobel(
+                        &m.iter().map(|v| v.abs()).collect::<Vec<_>>(),
+                        pe.width(),
+                        pe.height(),
+                    );
+                    binary_edges(&mag)
+                }
+                SearchEnergy::NormalisedSparsity => Vec::new(),
+            },
+            mask: match search.energy {
+                SearchEnergy::TvEdges { .. } => None,
+                SearchEnergy::NormalisedSparsity => busy_pixels(pe),
+            },
         })
         .collect();
     let s = cfg.linearisation.exponent_scale();
+    // the energy looks at the processed frame itself, before any demosaicking
+    let mut plain = cfg.clone();
+    plain.bayer = None;
+    let samples = cfg.exposure_samples;
     let energy = |cp: f32, cn: f32| -> f64 {
         prepared
             .iter()
             .map(|v| {
-                let g = exact_factors(v.pe, v.at, f64::from(cp) * s, f64::from(cn) * s);
-                let mut plain = cfg.clone();
-                plain.bayer = None;
-                let latent = apply_factors(v.blurry, &g, &plain);
-                sharpness_energy(
-                    &latent.gray(),
-                    latent.width,
-                    latent.height,
-                    &v.event_edges,
-                    search.tv_weight,
-                )
+                let (cp, cn) = (f64::from(cp) * s, f64::from(cn) * s);
+                match search.energy {
+                    SearchEnergy::NormalisedSparsity => {
+                        let g = latent_factors(v.pe, v.at, (cp, cn), samples);
+                        let latent = apply_factors(v.blurry, &g, &plain);
+                        normalised_sparsity(
+                            &encoded_gray(&latent, cfg.linearisation),
+                            latent.width,
+                            latent.height,
+                            v.mask.as_deref(),
+                        )
+                    }
+                    SearchEnergy::TvEdges { tv_weight } => {
+                        let g = latent_factors(v.pe, v.at, (cp, cn), samples);
+                        let latent = apply_factors(v.blurry, &g, &plain);
+                        let (w, h) = (latent.width, latent.height);
+                        sharpness_energy(&latent.gray(), w, h, &v.event_edges, tv_weight)
+                    }
+                }
             })
             .sum()
     };
@@ -163,8 +283,13 @@ pub fn estimate_thresholds(
     if !search.separate {
         return Thresholds::equal(c);
     }
-    let c_pos = minimise(|cp| energy(cp, c), search);
-    let c_neg = minimise(|cn| energy(c_pos, cn), search);
+    // coordinate descent from the common estimate: the two thresholds are coupled (a pixel's
+    // ON and OFF events meet in one exponent), so a single pass stops short
+    let (mut c_pos, mut c_neg) = (c, c);
+    for _ in 0..SEPARATE_ROUNDS {
+        c_pos = minimise(|cp| energy(cp, c_neg), search);
+        c_neg = minimise(|cn| energy(c_pos, cn), search);
+    }
     Thresholds { c_pos, c_neg }
 }
 
