@@ -3,7 +3,7 @@
 //!
 //! Usage: sfm_eval <work_dir> [--views N] [--seed S] [--estimate-focal] [--levels-dir DIR]
 //!        [--working-sizes 192,128] [--grid SPACING_FRAC] [--neighbours N]
-//!        [--max-reproj PX] [--no-global]
+//!        [--max-reproj PX]
 //! With `--levels-dir`, the scene is an existing folder with `images/` and `poses_bounds.npy`
 //! (e.g. a `blur_09` level of `gems synth --blur-levels`) instead of a generated one.
 //! Prints registered views, points, translation RMSE over the path extent after Sim(3)
@@ -22,7 +22,6 @@ fn main() {
         ..gems_synth::SynthConfig::small()
     };
     let mut estimate = false;
-    let mut no_global = false;
     let mut working_sizes: Option<Vec<u32>> = None;
     let mut grid: Option<f32> = None;
     let mut reproj: Option<f64> = None;
@@ -34,7 +33,6 @@ fn main() {
             "--views" => cfg.views = it.next().unwrap().parse().unwrap(),
             "--seed" => cfg.seed = it.next().unwrap().parse().unwrap(),
             "--estimate-focal" => estimate = true,
-            "--no-global" => no_global = true,
             "--max-reproj" => reproj = Some(it.next().unwrap().parse().unwrap()),
             "--grid" => grid = Some(it.next().unwrap().parse().unwrap()),
             "--neighbours" => neighbours = Some(it.next().unwrap().parse().unwrap()),
@@ -69,7 +67,6 @@ fn main() {
         seed: cfg.seed,
         ..SfmOptions::default()
     };
-    opts.global_restart = !no_global;
     if let Some(v) = reproj {
         opts.max_reproj_px = v;
     }

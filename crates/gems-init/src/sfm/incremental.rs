@@ -436,57 +436,7 @@ pub(crate) fn reconstruct(
     triangulate_all(&mut r, opts);
     run_ba(&mut r, i0, false, 30, opts);
     filter_outliers(&mut r, opts);
-    // The globally re-initialised alternative replaces the incremental result only when it keeps
-    // every registered view and fits the observations better.
-    if opts.global_restart
-        && let Some(alt) = global_restart(&r, pairs, i0, opts)
-    {
-        tracing::debug!(
-            incremental = r.mean_error(),
-            global = alt.mean_error(),
-            "global restart"
-        );
-        if alt.registered() == r.registered() && alt.mean_error() < r.mean_error() {
-            r = alt;
-        }
-    }
     Some(r)
-}
-
-/// The reconstruction re-initialised from averaged rotations and jointly solved positions
-/// ([`super::global`]), re-triangulated and bundle-adjusted; None when that is degenerate.
-fn global_restart(r: &Recon, pairs: &[PairCorr], fixed: usize, opts: &SfmOptions) -> Option<Recon> {
-    let rels = super::global::relative_rotations(
-        pairs,
-        &r.k,
-        opts.max_reproj_px,
-        opts.min_pair_inliers,
-        opts.seed,
-    );
-    let init: Vec<_> = r
-        .poses
-        .iter()
-        .map(|p| p.map(|p| p.r.into_inner()))
-        .collect();
-    let rot = super::global::average_rotations(&init, &rels, 50);
-    let poses = super::global::positions_from_rotations(r, &rot)?;
-    let mut alt = r.clone();
-    alt.poses = poses;
-    for t in alt.tracks.iter_mut() {
-        t.xyz = None;
-        for o in t.obs.iter_mut() {
-            o.active = true;
-        }
-    }
-    triangulate_all(&mut alt, opts);
-    for _ in 0..3 {
-        run_ba(&mut alt, fixed, false, 50, opts);
-        filter_outliers(&mut alt, opts);
-        triangulate_all(&mut alt, opts);
-    }
-    run_ba(&mut alt, fixed, false, 50, opts);
-    filter_outliers(&mut alt, opts);
-    Some(alt)
 }
 
 /// Free the focal in a final bundle adjustment, keeping the result only when the focal stays in

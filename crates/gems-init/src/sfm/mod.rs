@@ -27,7 +27,6 @@ pub mod ba;
 mod colmap_cli;
 pub mod features;
 pub mod geometry;
-mod global;
 mod incremental;
 mod output;
 mod tracking;
@@ -76,9 +75,9 @@ pub struct SfmOptions {
     pub grid_spacing_frac: f32,
     /// Best-overlapping views each view's points are tracked into.
     pub track_neighbours: usize,
-    /// After the incremental reconstruction, also re-initialise it from averaged rotations and
-    /// jointly solved positions, and keep that when it fits better.
-    pub global_restart: bool,
+    /// Tracking query points per view: its keypoints, then grid points, up to this many (the
+    /// cost of tracking grows with it).
+    pub max_query_points: usize,
     /// Seed of every random choice (RANSAC); same seed, same result.
     pub seed: u64,
 }
@@ -95,7 +94,7 @@ impl Default for SfmOptions {
             min_tri_angle_deg: 1.0,
             grid_spacing_frac: 0.04,
             track_neighbours: 8,
-            global_restart: true,
+            max_query_points: 300,
             seed: 0,
         }
     }
@@ -622,10 +621,13 @@ fn all_tracks(
         let mut nb: Vec<usize> = (0..n).filter(|&j| j != i && ov[i][j].score > 0.2).collect();
         nb.sort_by(|&a, &b| ov[i][b].score.total_cmp(&ov[i][a].score).then(a.cmp(&b)));
         nb.truncate(tp.neighbours);
+        // Keypoints come strongest-first per grid cell; beyond the budget they are dropped.
         let mut pts = feats[i].xy.clone();
+        pts.truncate(opts.max_query_points);
         if opts.grid_spacing_frac > 0.0 {
             let spacing = ((wl * opts.grid_spacing_frac).round() as usize).max(2);
-            let grid = tracking::grid_points(&smooth[i].img, tp.half, spacing, 0.1, &pts);
+            let budget = opts.max_query_points.saturating_sub(pts.len());
+            let grid = tracking::grid_points(&smooth[i].img, tp.half, spacing, 0.1, &pts, budget);
             pts.extend(grid);
         }
         let pts = &pts;

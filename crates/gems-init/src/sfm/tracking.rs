@@ -211,39 +211,63 @@ fn search(
     let (w, h) = (dst.img.w as i32, dst.img.h as i32);
     let npx = ((2 * half + 1) * (2 * half + 1)) as f64;
     let tside = (2 * half + 1) as usize;
-    for oy in -radius..=radius {
-        for ox in -radius..=radius {
-            let (qx, qy) = (cx + ox, cy + oy);
-            if qx - half < 0 || qy - half < 0 || qx + half >= w || qy + half >= h {
-                continue;
-            }
-            let (sm, sm2) = dst.box_sums(
-                (qx - half) as usize,
-                (qy - half) as usize,
-                (qx + half) as usize,
-                (qy + half) as usize,
-            );
-            let var = sm2 - sm * sm / npx;
-            if var < 1e-8 {
-                continue;
-            }
-            let mut dot = 0.0f32;
-            for (dy, trow) in (-half..=half).zip(s.tmpl.chunks_exact(tside)) {
-                let row = ((qy + dy) * w) as usize;
-                let wrow = &dst.img.data[row + (qx - half) as usize..=row + (qx + half) as usize];
-                dot += wrow.iter().zip(trow).map(|(a, b)| a * b).sum::<f32>();
-            }
-            s.scores[((oy + radius) * side + ox + radius) as usize] = dot / var.sqrt() as f32;
+    let score = |ox: i32, oy: i32| -> f32 {
+        let (qx, qy) = (cx + ox, cy + oy);
+        if qx - half < 0 || qy - half < 0 || qx + half >= w || qy + half >= h {
+            return f32::NEG_INFINITY;
         }
-    }
+        let (sm, sm2) = dst.box_sums(
+            (qx - half) as usize,
+            (qy - half) as usize,
+            (qx + half) as usize,
+            (qy + half) as usize,
+        );
+        let var = sm2 - sm * sm / npx;
+        if var < 1e-8 {
+            return f32::NEG_INFINITY;
+        }
+        let mut dot = 0.0f32;
+        for (dy, trow) in (-half..=half).zip(s.tmpl.chunks_exact(tside)) {
+            let row = ((qy + dy) * w) as usize;
+            let wrow = &dst.img.data[row + (qx - half) as usize..=row + (qx + half) as usize];
+            dot += wrow.iter().zip(trow).map(|(a, b)| a * b).sum::<f32>();
+        }
+        dot / var.sqrt() as f32
+    };
+    // Coarse-to-fine: the smoothed NCC surface is sampled on every other offset, then the best
+    // sample is hill-climbed on the full grid (a quarter of the work of an exhaustive search).
+    let idx = |ox: i32, oy: i32| ((oy + radius) * side + ox + radius) as usize;
     let mut best = (f32::NEG_INFINITY, 0i32, 0i32);
-    for oy in -radius..=radius {
-        for ox in -radius..=radius {
-            let v = s.scores[((oy + radius) * side + ox + radius) as usize];
+    for oy in (-radius..=radius).step_by(2) {
+        for ox in (-radius..=radius).step_by(2) {
+            let v = score(ox, oy);
+            s.scores[idx(ox, oy)] = v;
             if v > best.0 {
                 best = (v, ox, oy);
             }
         }
+    }
+    loop {
+        let mut moved = best;
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let (ox, oy) = (best.1 + dx, best.2 + dy);
+                if ox.abs() > radius || oy.abs() > radius {
+                    continue;
+                }
+                let k = idx(ox, oy);
+                if s.scores[k].is_nan() {
+                    s.scores[k] = score(ox, oy);
+                }
+                if s.scores[k] > moved.0 {
+                    moved = (s.scores[k], ox, oy);
+                }
+            }
+        }
+        if (moved.1, moved.2) == (best.1, best.2) {
+            break;
+        }
+        best = moved;
     }
     if best.0 < p.min_ncc || best.1.abs() == radius || best.2.abs() == radius {
         return None;
@@ -254,6 +278,7 @@ fn search(
             if (ox - best.1).abs() <= 2 && (oy - best.2).abs() <= 2 {
                 continue;
             }
+            // Offsets never evaluated are NaN and never win.
             let v = s.scores[((oy + radius) * side + ox + radius) as usize];
             if v > second {
                 second = v;
@@ -326,7 +351,7 @@ fn refine_lk(img: &Gray, start: [f32; 2], half: i32, tmpl: &[f32]) -> Option<[f3
         if (q[0] - start[0]).abs() > 1.5 || (q[1] - start[1]).abs() > 1.5 {
             return None;
         }
-        if dx.abs() < 1e-3 && dy.abs() < 1e-3 {
+        if dx.abs() < 0.01 && dy.abs() < 0.01 {
             break;
         }
     }
@@ -336,14 +361,16 @@ fn refine_lk(img: &Gray, start: [f32; 2], half: i32, tmpl: &[f32]) -> Option<[f3
 /// Dense query points for tracking: the centres of a grid with `spacing` px whose tracking patch
 /// (side 2·half+1) is well conditioned — the smaller eigenvalue of the gradient structure tensor
 /// summed over the patch is at least `min_rel` of the 90th percentile over the grid — and that
-/// lie at least `spacing`/2 from every point of `existing`. Corners are rare under heavy blur,
-/// but a large patch of a blurred image is usually still trackable in two directions.
+/// lie at least `spacing`/2 from every point of `existing`; at most `max_points`, the best
+/// conditioned. Corners are rare under heavy blur, but a large patch of a blurred image is
+/// usually still trackable in two directions.
 pub(crate) fn grid_points(
     img: &Gray,
     half: i32,
     spacing: usize,
     min_rel: f32,
     existing: &[[f32; 2]],
+    max_points: usize,
 ) -> Vec<[f32; 2]> {
     let (w, h) = (img.w, img.h);
     let hs = half as usize + 1;
@@ -404,7 +431,7 @@ pub(crate) fn grid_points(
         return Vec::new();
     }
     let min_d2 = (spacing as f32 * 0.5).powi(2);
-    cands
+    let mut kept: Vec<([f32; 2], f64)> = cands
         .into_iter()
         .filter(|(p, l)| {
             *l >= min_rel as f64 * p90
@@ -412,8 +439,13 @@ pub(crate) fn grid_points(
                     .iter()
                     .all(|q| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) >= min_d2)
         })
-        .map(|(p, _)| p)
-        .collect()
+        .collect();
+    if kept.len() > max_points {
+        // Strongest first; the sort is stable, so equal scores keep their raster order.
+        kept.sort_by(|a, b| b.1.total_cmp(&a.1));
+        kept.truncate(max_points);
+    }
+    kept.into_iter().map(|(p, _)| p).collect()
 }
 
 /// Track `pts` of `src` into `dst` (predicted at pts + shift). Returns, per point, the position
