@@ -141,9 +141,22 @@ pub struct InitConfig {
     /// frustums, at the depths its points occupy (blurry images give sparse clouds, and MCMC
     /// grows a set by only 5 % per refinement); at most `mcmc.cap_max`.
     pub min_points: usize,
+    /// Where the top-up points of a sparse SfM cloud go.
+    pub top_up: TopUp,
     /// Depth range (in units of the scene scale) of random points inside the camera frustums.
     pub random_near: f32,
     pub random_far: f32,
+}
+
+/// How a sparse SfM cloud is topped up to `min_points`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TopUp {
+    /// Random points with random colours inside the camera frustums, at the cloud's depths.
+    Frustums,
+    /// Points scattered around the cloud's points (σ = their nearest-neighbour distance), with
+    /// their colours.
+    NearPoints,
 }
 
 impl Default for InitConfig {
@@ -154,6 +167,7 @@ impl Default for InitConfig {
             knn: 3,
             random_points: 100_000,
             min_points: 10_000,
+            top_up: TopUp::NearPoints,
             random_near: 0.1,
             random_far: 3.0,
         }

@@ -10,6 +10,7 @@ use std::num::NonZeroUsize;
 use gems_splat::{Camera, Gaussians, SH_COEFFS};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rand::{Rng, RngExt};
+use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
 use crate::TrainError;
@@ -121,6 +122,29 @@ pub fn random_in_frustums<R: Rng + ?Sized>(
     Ok((points, colors))
 }
 
+/// `count` points scattered around a sparse cloud: each copies a random source point's colour and
+/// sits at a normal offset (σ = the source's RMS distance to its `knn` nearest neighbours) from it.
+/// Sparse SfM clouds sample the surfaces; this fills the surfaces between their samples instead
+/// of the empty space the frustums also contain.
+pub fn near_points<R: Rng + ?Sized>(
+    points: &[[f32; 3]],
+    colors: &[[f32; 3]],
+    knn: usize,
+    count: usize,
+    rng: &mut R,
+) -> Result<PointCloud, TrainError> {
+    let sigma = knn_rms_distance(points, knn)?;
+    let mut out_p = Vec::with_capacity(count);
+    let mut out_c = Vec::with_capacity(count);
+    for _ in 0..count {
+        let i = rng.random_range(0..points.len());
+        let e: [f32; 3] = std::array::from_fn(|_| StandardNormal.sample(rng));
+        out_p.push(std::array::from_fn(|a| points[i][a] + sigma[i] * e[a]));
+        out_c.push(colors[i]);
+    }
+    Ok((out_p, out_c))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -197,5 +221,46 @@ mod tests {
             assert!((-1e-3..=64.001).contains(&u) && (-1e-3..=48.001).contains(&v));
         }
         assert!(random_in_frustums(&[], 5, 0.5, 4.0, &mut rng).is_err());
+    }
+
+    #[test]
+    fn near_points_scatter_at_the_neighbour_scale_with_source_colours() {
+        // Two clusters of 50 points on a plane: one spaced 0.01 apart, one 0.1 apart.
+        let mut pts = Vec::new();
+        let mut cols = Vec::new();
+        for (spacing, x0, colour) in [
+            (0.01f32, 0.0f32, [1.0, 0.0, 0.0]),
+            (0.1, 10.0, [0.0, 0.0, 1.0]),
+        ] {
+            for i in 0..50 {
+                pts.push([
+                    x0 + spacing * (i % 10) as f32,
+                    spacing * (i / 10) as f32,
+                    0.0,
+                ]);
+                cols.push(colour);
+            }
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let (new_p, new_c) = near_points(&pts, &cols, 3, 4000, &mut rng).unwrap();
+        assert_eq!((new_p.len(), new_c.len()), (4000, 4000));
+        let (mut red, mut blue) = (Vec::new(), Vec::new());
+        for (p, c) in new_p.iter().zip(&new_c) {
+            // Colour says which cluster the point came from; z is the pure offset.
+            if c[0] == 1.0 {
+                assert!(p[0] < 5.0);
+                red.push(p[2].abs());
+            } else {
+                assert!(c[2] == 1.0 && p[0] > 5.0);
+                blue.push(p[2].abs());
+            }
+        }
+        // E|N(0, σ)| = σ·sqrt(2/π); σ ≈ the spacing (slightly more: diagonal neighbours).
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+        let (r, b) = (mean(&red), mean(&blue));
+        assert!(red.len() > 1500 && blue.len() > 1500);
+        assert!((0.007..0.012).contains(&r), "red offset {r}");
+        assert!((0.07..0.12).contains(&b), "blue offset {b}");
+        assert!(near_points(&pts[..1], &cols[..1], 3, 5, &mut rng).is_err());
     }
 }

@@ -20,8 +20,9 @@ use rand_distr::{Distribution, Normal};
 
 use crate::TrainError;
 use crate::blur::{Intrinsics, camera_from_c2w};
+use crate::config::TopUp;
 use crate::config::TrainConfig;
-use crate::init::{from_points, random_in_frustums};
+use crate::init::{from_points, near_points, random_in_frustums};
 use crate::normalize::Normalization;
 use crate::trainer::{TrainInput, TrainView};
 
@@ -300,9 +301,13 @@ pub fn prepare_input(
                     extra,
                     near,
                     far,
-                    "sparse SfM cloud: adding random points inside the camera frustums"
+                    top_up = ?cfg.init.top_up,
+                    "sparse SfM cloud: adding points"
                 );
-                let (rp, rc) = random_in_frustums(&cams, extra, near, far, &mut rng)?;
+                let (rp, rc) = match cfg.init.top_up {
+                    TopUp::Frustums => random_in_frustums(&cams, extra, near, far, &mut rng)?,
+                    TopUp::NearPoints => near_points(&p, &c, cfg.init.knn, extra, &mut rng)?,
+                };
                 p.extend(rp);
                 c.extend(rc);
             }
