@@ -162,6 +162,41 @@ fn srgb_encoded_average_inverts_the_mean_of_srgb_frames_exactly() {
 }
 
 #[test]
+fn sampled_exposure_is_the_mean_over_the_sub_frame_instants() {
+    // window [0, 100], N = 5 instants 0, 25, 50, 75, 100; ON at 30, OFF at 60, ON at 100 (an
+    // event at an instant counts there); c = 0.4, reference 50 → E_f at the instants
+    // −0.4, −0.4, 0, −0.4, 0  →  J = (3·e^−0.4 + 2)/5
+    let ev = EventStream::from_columns(
+        1,
+        1,
+        vec![30, 60, 100],
+        vec![0; 3],
+        vec![0; 3],
+        vec![1, -1, 1],
+    )
+    .unwrap();
+    let pe = PixelEvents::new(ev.as_slice(), 0, 100).unwrap();
+    let j = (3.0 * (-0.4f64).exp() + 2.0) / 5.0;
+    let g = sampled_factors(&pe, 50, 0.4, 0.4, 5);
+    assert!(
+        (f64::from(g[0]) - 1.0 / j).abs() < 1e-6,
+        "{} vs {}",
+        g[0],
+        1.0 / j
+    );
+    let c = EdiConfig {
+        exposure_samples: Some(5),
+        ..cfg()
+    };
+    let out = edi_exact(&gray(1, 1, vec![0.3]), &pe, 50, Thresholds::equal(0.4), &c).unwrap();
+    assert!((f64::from(out.data[0]) - 0.3 / j).abs() < 1e-6);
+    // the continuous exposure weighs the same events by time instead: J differs
+    let cont = exact_factors(&pe, 50, 0.4, 0.4);
+    let j_cont = (30.0 * (-0.4f64).exp() + 30.0 + 40.0 * (-0.4f64).exp()) / 100.0;
+    assert!((f64::from(cont[0]) - 1.0 / j_cont).abs() < 1e-6);
+}
+
+#[test]
 fn four_bin_example_matches_e2nerf_closed_form() {
     // 2 pixels, window [0, 400], b = 4, Θ = 0.3; pixel 0 bins (+2, −1, 0, +1), pixel 1 (−1, −1, +3, 0)
     let mut t = Vec::new();

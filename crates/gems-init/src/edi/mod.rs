@@ -14,16 +14,22 @@
 //!   boundaries (b = 13 → 14 frames = GeMS-E's 14 virtual views). Also from pre-binned signed counts
 //!   ([`gems_events::BinCounts`]).
 //! - **Thresholds** ([`estimate_thresholds`]): when `c` is unknown, a 1-D search on [0.1, 0.5]
-//!   (coarse grid, then golden section) minimising `λ·TV(L) − Σ edge(L)·edge(M)` on the gray
-//!   latent (M = signed event map), per view or over several views; optionally c₊ and c₋ apart.
-//!   This is the published energy; it does **not** recover the threshold on our synthetic data
-//!   (see [`search`](estimate_thresholds) docs) — prefer known thresholds.
+//!   (coarse grid, then golden section) minimising the normalised sparsity `‖∇L‖₁/‖∇L‖₂` of the
+//!   gray latent over the pixels that fired events ([`SearchEnergy`]; the published
+//!   `λ·TV(L) − Σ edge(L)·edge(M)` is kept as an option but runs to the lower bound), per view
+//!   or over several views; optionally c₊ and c₋ apart. Measured: within 0.03 of the simulated
+//!   c on a moving dead-leaves texture (c 0.15–0.3, c₊ ≠ c₋) and on the `gems synth` small
+//!   preset (c = 0.2 → 0.172, c = 0.3 → 0.298).
 //!
 //! # Values
-//! [`Linearisation`] says how stored values relate to the light the events saw; the same event
-//! factor multiplies every channel; saturated inputs (≥ 1) are kept; outputs are clamped to
-//! `[0, upper_clamp]`. A single-channel Bayer mosaic is deblurred per mosaic pixel and then
-//! demosaiced ([`BayerPattern`]).
+//! [`Linearisation`] says how stored values relate to the light the events saw
+//! ([`Linearisation::SrgbEncodedAverage`] for `gems synth` and other mean-of-sRGB-frames blur);
+//! [`EdiConfig::exposure_samples`] models a blurry image that is the mean of N sub-frames
+//! ([`sampled_factors`]) instead of a continuous exposure. The same event factor multiplies
+//! every channel (exact only when a pixel's hue does not change during the exposure: with
+//! luminance events and coloured texture, EDI cannot know the hue at the reference time);
+//! saturated inputs (≥ 1) are kept; outputs are clamped to `[0, upper_clamp]`. A single-channel
+//! Bayer mosaic is deblurred per mosaic pixel and then demosaiced ([`BayerPattern`]).
 //!
 //! # Scenes
 //! [`deblur_scene`]`(&Scene, &EdiConfig)` runs EDI on every view that has an exposure window (and
