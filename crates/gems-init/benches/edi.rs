@@ -1,8 +1,12 @@
 //! EDI of one 400×270 RGB view with 2 M events in its exposure (issue 5's benchmark), exact and
-//! binned (b = 13), including the per-pixel grouping of the events.
+//! binned (b = 13), including the per-pixel grouping of the events; and the threshold search on
+//! that view (grid of 17 + 12 golden-section steps, each one exact EDI + normalised sparsity).
 
 use gems_events::EventStream;
-use gems_init::edi::{EdiConfig, Image, PixelEvents, Thresholds, edi_binned, edi_exact};
+use gems_init::edi::{
+    EdiConfig, Image, PixelEvents, SearchConfig, Thresholds, edi_binned, edi_exact,
+    estimate_thresholds,
+};
 use rand::{RngExt, SeedableRng};
 
 const W: usize = 400;
@@ -60,4 +64,13 @@ fn binned13_including_grouping(bencher: divan::Bencher) {
         let pe = PixelEvents::new(ev.as_slice(), 0, T).unwrap();
         edi_binned(&img, &pe.bin_on_off(13), 13, Thresholds::equal(0.2), &cfg).unwrap()
     });
+}
+
+#[divan::bench(sample_count = 3)]
+fn threshold_search_one_view(bencher: divan::Bencher) {
+    let (img, ev) = setup();
+    let pe = PixelEvents::new(ev.as_slice(), 0, T).unwrap();
+    let cfg = EdiConfig::default();
+    let search = SearchConfig::default();
+    bencher.bench(|| estimate_thresholds(&[(&img, &pe, T / 2)], &search, &cfg));
 }
