@@ -306,6 +306,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     });
     tracing::info!(blur_px = blur, working_sizes = ?sizes, "estimated motion blur");
     let mut best: Option<(incremental::Recon, u32, f64)> = None;
+    let mut attempts: Vec<Attempt> = Vec::new();
     let mut t_feat = 0.0;
     let mut t_rec = 0.0;
     let mut textureless: Option<Vec<String>> = None;
@@ -367,17 +368,9 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
                 error_px = err,
                 "sfm attempt"
             );
-            let better = match &best {
-                None => true,
-                Some((b, _, bs)) => {
-                    let be = b.mean_error() / bs;
-                    nreg > b.registered() || (nreg == b.registered() && err < be)
-                }
-            };
-            if better {
-                best = Some((rec, ws, scale));
-            }
+            attempts.push((rec, ws, scale, err, f / scale));
         }
+        best = choose_attempt(&attempts, long);
         t_rec += tr.elapsed().as_secs_f64();
         if best
             .as_ref()
@@ -429,6 +422,37 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         });
     }
     Ok(result)
+}
+
+/// A reconstruction with its working size, scale, mean error (full-resolution px) and the
+/// focal it started from (full-resolution px).
+type Attempt = (incremental::Recon, u32, f64, f64, f64);
+
+/// Relative spread of mean reprojection errors within which focal candidates count as equally
+/// good. Under heavy blur the error barely depends on the focal (±1 % over a ×3 range), so the
+/// smallest error is noise, not evidence.
+const FOCAL_ERROR_TIE: f64 = 0.01;
+
+/// Focal prior, as a multiple of the long image side (a 53° field of view across it), that
+/// breaks ties between equally good focal candidates.
+const FOCAL_PRIOR: f64 = 1.0;
+
+/// The best attempt so far: most registered views; among those, errors within [`FOCAL_ERROR_TIE`] of the smallest are ties, and the tie
+/// whose starting focal is nearest [`FOCAL_PRIOR`] wins.
+fn choose_attempt(attempts: &[Attempt], long: f64) -> Option<(incremental::Recon, u32, f64)> {
+    let nreg = attempts.iter().map(|a| a.0.registered()).max()?;
+    let min_err = attempts
+        .iter()
+        .filter(|a| a.0.registered() == nreg)
+        .map(|a| a.3)
+        .fold(f64::INFINITY, f64::min);
+    let prior = FOCAL_PRIOR * long;
+    let dist = |f: f64| (f / prior).ln().abs();
+    attempts
+        .iter()
+        .filter(|a| a.0.registered() == nreg && a.3 <= min_err * (1.0 + FOCAL_ERROR_TIE))
+        .min_by(|a, b| dist(a.4).total_cmp(&dist(b.4)).then(a.3.total_cmp(&b.3)))
+        .map(|a| (a.0.clone(), a.1, a.2))
 }
 
 fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
