@@ -15,11 +15,11 @@
 //!   ([`gems_events::BinCounts`]).
 //! - **Thresholds** ([`estimate_thresholds`]): when `c` is unknown, a 1-D search on [0.1, 0.5]
 //!   (coarse grid, then golden section) minimising the normalised sparsity `‖∇L‖₁/‖∇L‖₂` of the
-//!   gray latent over the pixels that fired events ([`SearchEnergy`]; the published
+//!   gray latent near strong monotone edges ([`SearchEnergy`]; the published
 //!   `λ·TV(L) − Σ edge(L)·edge(M)` is kept as an option but runs to the lower bound), per view
 //!   or over several views; optionally c₊ and c₋ apart. Measured: within 0.03 of the simulated
 //!   c on a moving dead-leaves texture (c 0.15–0.3, c₊ ≠ c₋) and on the `gems synth` small
-//!   preset (c = 0.2 → 0.172, c = 0.3 → 0.298).
+//!   preset (c = 0.2 → 0.189, c = 0.3 → 0.308).
 //!
 //! # Values
 //! [`Linearisation`] says how stored values relate to the light the events saw

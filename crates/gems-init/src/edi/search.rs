@@ -8,10 +8,12 @@
 //!
 //! **Default energy, [`SearchEnergy::NormalisedSparsity`]:** `‖∇L‖₁ / ‖∇L‖₂` of the gray latent
 //! (Rec. 709 luma) in the sRGB-encoded domain (Krishnan et al. 2011; natural-image statistics
-//! are defined on encoded values). Being scale-invariant, it does not reward the darkening or
-//! flattening a wrong c brings, and since a ramp spreads an edge's gradient over many pixels
-//! (ℓ₁/ℓ₂ grows like √width) it is raised by residual blur and by overshoot ghosts alike, while
-//! a total variation cannot tell a ramp from a step.
+//! are defined on encoded values), over the pixels near strong monotone edges (net event count
+//! ≥ 3 in the 3×3 neighbourhood), where the quantisation of the events matters least. Being
+//! scale-invariant, it does not reward the darkening or flattening a wrong c brings, and since a
+//! ramp spreads an edge's gradient over many pixels (ℓ₁/ℓ₂ grows like √width) it is raised by
+//! residual blur and by overshoot ghosts alike, while a total variation cannot tell a ramp from
+//! a step.
 //!
 //! **Published energy, [`SearchEnergy::TvEdges`]** (EDI authors, davis-EDI-rs, ev-thresh-est;
 //! events.md §1.4): `λ·Σ|∇L| − Σ edge(L)·edge(M)` with Sobel magnitudes, edge(·) binarised at
@@ -179,20 +181,31 @@ fn encoded_gray(img: &Image, lin: Linearisation) -> Vec<f32> {
         .collect()
 }
 
-/// Events a pixel (or one of its 8 neighbours) must have for the normalised sparsity to look
-/// at it: edges that fired only one or two events carry the largest relative quantisation error
-/// (an edge of contrast Δ fires ⌊Δ/c⌋ events), so they would pull the estimate upwards.
-const MIN_EVENTS: usize = 3;
+/// Net event count `|n_on − n_off|` a pixel (or one of its 8 neighbours) must have for the
+/// normalised sparsity to look at it. An edge of log contrast Δ fires ⌊Δ/c⌋ events, so edges
+/// that fired one or two carry the largest relative quantisation error and pull the estimate
+/// upwards; fine texture sweeping past a pixel fires many events of both signs whose
+/// quantisation error (up to c in log per pixel) grows with c and pulls it downwards. Strong
+/// monotone edges are what the threshold is best read from.
+const MIN_NET_EVENTS: u32 = 3;
 
 /// Coordinate-descent rounds (c₊ then c₋) of the separate estimate.
 const SEPARATE_ROUNDS: usize = 3;
 
-/// Pixels with at least [`MIN_EVENTS`] events in their 3×3 neighbourhood (`None` when there are
+/// Pixels with a net count of at least [`MIN_NET_EVENTS`] in their 3×3 neighbourhood (`None` when there are
 /// none: then every pixel counts).
 fn busy_pixels(pe: &PixelEvents) -> Option<Vec<bool>> {
     let (w, h) = (pe.width(), pe.height());
     let busy: Vec<bool> = (0..w * h)
-        .map(|k| pe.pixel(k).0.len() >= MIN_EVENTS)
+        .map(|k| {
+            pe.pixel(k)
+                .1
+                .iter()
+                .map(|&p| i32::from(p))
+                .sum::<i32>()
+                .unsigned_abs()
+                >= MIN_NET_EVENTS
+        })
         .collect();
     let mask: Vec<bool> = (0..w * h)
         .map(|k| {
@@ -218,7 +231,9 @@ struct Prepared<'a> {
 /// Estimates thresholds from views `(blurry, events, reference time)` by minimising
 /// `search.energy` of the exact EDI latent at the reference time; all views share one result
 /// (call once per view for per-view estimates) and their energies are summed. With
-/// `search.separate`, c₊ and then c₋ are refined one at a time after the common estimate.
+/// `search.separate`, c₊ and c₋ are refined in turn (coordinate descent) from the common
+/// estimate; if one of them runs to the end of the range the pair is not identifiable from
+/// these views and the common estimate is returned (with a warning).
 pub fn estimate_thresholds(
     views: &[(&Image, &PixelEvents, i64)],
     search: &SearchConfig,
@@ -289,6 +304,20 @@ pub fn estimate_thresholds(
     for _ in 0..SEPARATE_ROUNDS {
         c_pos = minimise(|cp| energy(cp, c_neg), search);
         c_neg = minimise(|cn| energy(c_pos, cn), search);
+    }
+    // A threshold driven to the end of the range (while the common one was inside it) means the
+    // energy found no minimum in the c₊/c₋ direction — seen on data where one polarity's edges
+    // are few: the pair is not identifiable there, the common estimate is kept.
+    let (lo, hi) = search.range;
+    let at_bound = |v: f32| v <= lo + 1e-3 || v >= hi - 1e-3;
+    if (at_bound(c_pos) || at_bound(c_neg)) && !at_bound(c) {
+        tracing::warn!(
+            c_pos,
+            c_neg,
+            c,
+            "separate thresholds ran to the search bound; keeping the common estimate"
+        );
+        return Thresholds::equal(c);
     }
     Thresholds { c_pos, c_neg }
 }
