@@ -309,11 +309,11 @@ fn tiny_scene_files_match_the_simulator_and_write_a_readable_scene() {
     assert_eq!(n_images, 14 * scene.views.len());
 }
 
-/// The default search (normalised sparsity) over four views of the small preset, as
-/// `deblur_scene` runs it for one threshold per scene, at the preset's c = 0.2 and at c = 0.3.
+/// The default search (normalised sparsity) over two views of the small preset (one threshold
+/// for both, as `deblur_scene` estimates one per scene), at the preset's c = 0.2 and at c = 0.3.
 #[test]
 fn small_preset_threshold_search_recovers_the_simulated_threshold() {
-    let views = [0usize, 4, 8, 12];
+    let views = [0usize, 8];
     for c in [0.2f32, 0.3] {
         let mut cfg = SynthConfig::small();
         let ev = cfg.events.as_mut().unwrap();
@@ -346,8 +346,9 @@ fn small_preset_threshold_search_recovers_the_simulated_threshold() {
             "small preset, simulated c = {c}, views {views:?}: global {:.3}, separate {:.3}/{:.3}",
             global.c_pos, separate.c_pos, separate.c_neg
         );
-        // Measured: c = 0.2 → 0.189 (separate 0.181/0.198); c = 0.3 → 0.308 (the separate pair
-        // ran to the range bound and fell back to the common estimate, 0.308/0.308).
+        // Measured: c = 0.2 → 0.191 (separate 0.182/0.200); c = 0.3 → 0.313 (the separate pair
+        // ran to the range bound and fell back to the common estimate). Over views 0, 4, 8, 12
+        // (as `deblur_scene` samples a 16-view scene): 0.189 and 0.308.
         assert!((global.c_pos - c).abs() <= 0.03, "c = {c}: {global:?}");
         assert!(
             (separate.c_pos - c).abs() <= 0.03 && (separate.c_neg - c).abs() <= 0.03,
