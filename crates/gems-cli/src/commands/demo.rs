@@ -96,7 +96,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let sfm_images = if args.events {
             tracing::info!("2/3 EDI deblurring with the events, then structure from motion");
             let threshold = synth.events.as_ref().map_or(0.2, |e| e.threshold_pos);
-            super::train::edi_images(&scene, &out.join("train"), threshold)?
+            // gems synth blurs by averaging sRGB-encoded frames; its events see linear light.
+            super::train::edi_images(
+                &scene,
+                &out.join("train"),
+                threshold,
+                gems_init::edi::Linearisation::SrgbEncodedAverage,
+            )?
         } else {
             tracing::info!("2/3 structure from motion on the blurry images");
             scene.clone()

@@ -24,6 +24,19 @@ pub enum LinearisationArg {
     SrgbEncodedAverage,
 }
 
+impl LinearisationArg {
+    /// The library's linearisation, with `gamma` for the modes that take one.
+    pub fn resolve(self, gamma: f32) -> Linearisation {
+        match self {
+            LinearisationArg::Identity => Linearisation::Identity,
+            LinearisationArg::Srgb => Linearisation::Srgb,
+            LinearisationArg::Gamma => Linearisation::Gamma(gamma),
+            LinearisationArg::EncodedAverage => Linearisation::EncodedAverage(gamma),
+            LinearisationArg::SrgbEncodedAverage => Linearisation::SrgbEncodedAverage,
+        }
+    }
+}
+
 /// Arguments of `gems edi`.
 #[derive(clap::Args)]
 pub struct Args {
@@ -74,13 +87,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let scene = gems_data::open_scene(&args.scene, &gems_data::OpenOptions::default())
         .with_context(|| format!("opening scene {}", args.scene.display()))?;
-    let linearisation = match args.linearisation {
-        LinearisationArg::Identity => Linearisation::Identity,
-        LinearisationArg::Srgb => Linearisation::Srgb,
-        LinearisationArg::Gamma => Linearisation::Gamma(args.gamma),
-        LinearisationArg::EncodedAverage => Linearisation::EncodedAverage(args.gamma),
-        LinearisationArg::SrgbEncodedAverage => Linearisation::SrgbEncodedAverage,
-    };
+    let linearisation = args.linearisation.resolve(args.gamma);
     let cfg = EdiConfig {
         thresholds: Thresholds {
             c_pos: args.c_pos.unwrap_or(args.threshold),

@@ -8,6 +8,7 @@ use anyhow::Context;
 use gems_train::TrainConfig;
 use gems_train::prepare::InitMode;
 
+use super::edi::LinearisationArg;
 use super::pipeline::{TrainJob, train_and_report};
 
 /// Initialisation of poses and points.
@@ -77,6 +78,14 @@ pub struct Args {
     /// Event contrast threshold for EDI (the simulator's or camera's C).
     #[arg(long, default_value_t = 0.2)]
     pub event_threshold: f32,
+    /// How the blurry images relate to the light the events saw, for EDI. The default is the
+    /// trainer's own blur model (a blurry image is the mean of sRGB-encoded sharp frames, as in
+    /// GeMS, BAD-Gaussians and `gems synth`); `srgb` for cameras that blur in linear light.
+    #[arg(long, value_enum, default_value_t = LinearisationArg::SrgbEncodedAverage)]
+    pub event_linearisation: LinearisationArg,
+    /// Gamma for --event-linearisation gamma / encoded-average.
+    #[arg(long, default_value_t = 2.2)]
+    pub event_gamma: f32,
     /// Skip evaluation and report (train and export only).
     #[arg(long)]
     pub no_eval: bool,
@@ -108,7 +117,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // With events, the initialiser sees the EDI-deblurred images instead of the blurry ones.
     let init_images = || -> anyhow::Result<PathBuf> {
         if args.events {
-            edi_images(&args.scene, &args.output, args.event_threshold)
+            edi_images(
+                &args.scene,
+                &args.output,
+                args.event_threshold,
+                args.event_linearisation.resolve(args.event_gamma),
+            )
         } else {
             Ok(args.scene.clone())
         }
@@ -169,7 +183,12 @@ fn earlier_model(output: &Path, init: Init) -> Option<PathBuf> {
 
 /// EDI-deblurs the scene's blurry images with its events into `<output>/edi` (a scene folder)
 /// and returns that folder. An existing folder from an earlier run is reused.
-pub fn edi_images(scene: &Path, output: &Path, threshold: f32) -> anyhow::Result<PathBuf> {
+pub fn edi_images(
+    scene: &Path,
+    output: &Path,
+    threshold: f32,
+    linearisation: gems_init::edi::Linearisation,
+) -> anyhow::Result<PathBuf> {
     let dir = output.join("edi");
     if dir.join("images").is_dir() {
         tracing::info!(dir = %dir.display(), "reusing EDI images");
@@ -185,6 +204,7 @@ pub fn edi_images(scene: &Path, output: &Path, threshold: f32) -> anyhow::Result
     }
     let cfg = gems_init::edi::EdiConfig {
         thresholds: gems_init::edi::Thresholds::equal(threshold),
+        linearisation,
         ..Default::default()
     };
     let edi = gems_init::edi::deblur_scene(&s, &cfg)?;
