@@ -295,7 +295,10 @@ fn initial_pair(
             .then((a.i, a.j).cmp(&(b.i, b.j)))
     });
     let mut best: Option<(f64, usize, usize, Pose)> = None;
-    let good_angle = (3.0f64).max(2.0 * opts.min_tri_angle_deg).to_radians();
+    // A wide initial baseline: with a few degrees the rotation and the sideways translation of
+    // the pair trade off against each other (bas-relief ambiguity) under blur noise, and the
+    // error locks in as every later view is registered against it.
+    let good_angle = (6.0f64).max(2.0 * opts.min_tri_angle_deg).to_radians();
     for pm in order.iter().take(30) {
         let x1: Vec<_> = pm.x1.iter().map(|p| k.normalise(p)).collect();
         let x2: Vec<_> = pm.x2.iter().map(|p| k.normalise(p)).collect();

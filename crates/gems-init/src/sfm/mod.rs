@@ -651,7 +651,8 @@ fn all_tracks(
         if opts.grid_spacing_frac > 0.0 {
             let spacing = ((wl * opts.grid_spacing_frac).round() as usize).max(2);
             let budget = opts.max_query_points.saturating_sub(pts.len());
-            let grid = tracking::grid_points(&smooth[i].img, tp.half, spacing, 0.1, &pts, budget);
+            let grid =
+                tracking::grid_points(&smooth[i].img, tp.half, spacing, 0.1, 0.2, &pts, budget);
             pts.extend(grid);
         }
         let pts = &pts;

@@ -360,7 +360,9 @@ fn refine_lk(img: &Gray, start: [f32; 2], half: i32, tmpl: &[f32]) -> Option<[f3
 
 /// Dense query points for tracking: the centres of a grid with `spacing` px whose tracking patch
 /// (side 2·half+1) is well conditioned — the smaller eigenvalue of the gradient structure tensor
-/// summed over the patch is at least `min_rel` of the 90th percentile over the grid — and that
+/// summed over the patch is at least `min_rel` of the 90th percentile over the grid and at least
+/// `min_isotropy` of the larger one (a patch smeared along the blur direction is matched with a
+/// bias along it, which bends the reconstructed camera path) — and that
 /// lie at least `spacing`/2 from every point of `existing`; at most `max_points`, the best
 /// conditioned. Corners are rare under heavy blur, but a large patch of a blurred image is
 /// usually still trackable in two directions.
@@ -369,6 +371,7 @@ pub(crate) fn grid_points(
     half: i32,
     spacing: usize,
     min_rel: f32,
+    min_isotropy: f32,
     existing: &[[f32; 2]],
     max_points: usize,
 ) -> Vec<[f32; 2]> {
@@ -415,8 +418,12 @@ pub(crate) fn grid_points(
             let a = boxed(&ixx, x0, y0, x1, y1);
             let c = boxed(&iyy, x0, y0, x1, y1);
             let b = boxed(&ixy, x0, y0, x1, y1);
-            let lmin = 0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt();
-            cands.push(([x as f32 + 0.5, y as f32 + 0.5], lmin));
+            let disc = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+            let lmin = 0.5 * (a + c) - disc;
+            let lmax = 0.5 * (a + c) + disc;
+            if lmin >= min_isotropy as f64 * lmax {
+                cands.push(([x as f32 + 0.5, y as f32 + 0.5], lmin));
+            }
             x += spacing;
         }
         y += spacing;
@@ -512,6 +519,42 @@ mod tests {
                 "{pt:?} → {q:?}"
             );
         }
+    }
+
+    #[test]
+    fn grid_points_skip_flat_regions_and_respect_budget_and_spacing() {
+        // Left half textured, right half flat.
+        let mut g = pattern(120, 80, 0.0, 0.0);
+        for y in 0..80 {
+            for x in 60..120 {
+                g.data[y * 120 + x] = 0.5;
+            }
+        }
+        let existing = [[20.5f32, 20.5]];
+        let pts = grid_points(&g, 5, 6, 0.1, 0.0, &existing, 1000);
+        assert!(pts.len() >= 20, "{}", pts.len());
+        for p in &pts {
+            // Patches reaching the flat half by more than their half-size are ill-conditioned.
+            assert!(p[0] < 60.0 + 5.0, "{p:?} in the flat half");
+            assert!(
+                (p[0] - 20.5).powi(2) + (p[1] - 20.5).powi(2) >= 9.0,
+                "{p:?}"
+            );
+        }
+        let capped = grid_points(&g, 5, 6, 0.1, 0.0, &existing, 7);
+        assert_eq!(capped.len(), 7);
+        assert!(grid_points(&g, 5, 6, 0.1, 0.0, &existing, 0).is_empty());
+        // Stripes (texture almost only across x, like a smear) are kept only without the
+        // isotropy requirement.
+        let stripes = Gray {
+            w: 80,
+            h: 60,
+            data: (0..80 * 60)
+                .map(|i| ((i % 80) as f32 * 0.4).sin() + 0.05 * ((i / 80) as f32 * 0.3).sin())
+                .collect(),
+        };
+        assert!(!grid_points(&stripes, 5, 6, 0.1, 0.0, &[], 1000).is_empty());
+        assert!(grid_points(&stripes, 5, 6, 0.1, 0.2, &[], 1000).is_empty());
     }
 
     #[test]
