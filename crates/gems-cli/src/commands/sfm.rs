@@ -15,7 +15,8 @@ pub struct Args {
     /// Focal length in pixels when known (held fixed); estimated otherwise.
     #[arg(long)]
     pub focal: Option<f64>,
-    /// Long side (px) of the pyramid levels to try, in order (default: 192,128,96).
+    /// Long side (px) of the pyramid levels to try (default: 192,128,96,64), nearest first to
+    /// the level where the estimated motion blur is about 10 px.
     #[arg(long, value_delimiter = ',')]
     pub working_size: Option<Vec<u32>>,
     /// Keypoints per image.
@@ -78,13 +79,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     sfm::write_outputs(&result, &args.out)?;
     let s = &result.stats;
     println!(
-        "registered {}/{} views, {} points, mean track length {:.2}, reprojection error {:.2} px, focal {:.1} px, {:.1} s",
+        "registered {}/{} views, {} points, mean track length {:.2}, reprojection error {:.2} px, focal {:.1} px, estimated blur {:.0} px (working size {}), {:.1} s",
         s.registered,
         s.total,
         s.points,
         s.mean_track_length,
         s.mean_reprojection_error,
         s.focal,
+        s.blur_px_estimate,
+        s.working_size,
         s.seconds
     );
     if !s.unregistered.is_empty() {

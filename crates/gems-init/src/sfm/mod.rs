@@ -1,21 +1,28 @@
 //! Built-in blur-robust structure from motion.
 //!
 //! Pipeline ([`run_sfm`]):
-//! 1. every image is reduced to a *working level* (long side [`SfmOptions::working_sizes`]) where
-//!    30–60 px of motion blur shrinks to a few pixels; Shi–Tomasi keypoints of the smoothed image
+//! 1. the motion-blur length is estimated from the images (autocorrelation of the directional
+//!    derivative, [`SfmStats::blur_px_estimate`]); the *working levels* (long side
+//!    [`SfmOptions::working_sizes`]) are tried nearest-first to the level where the blur is about
+//!    10 px, until one registers every view. Shi–Tomasi keypoints of the smoothed working image
 //!    are described by normalised patches ([`features`]);
 //! 2. all pairs are matched (mutual nearest neighbour + ratio test) and verified with a
 //!    fundamental-matrix RANSAC; verified matches are chained into tracks (union–find);
-//! 3. the initial pair maximises inliers × parallax; its essential matrix gives the first two
-//!    poses; further views are added by RANSAC PnP, tracks are triangulated with angle,
+//! 3. each view's keypoints plus a grid of well-conditioned, isotropic patches
+//!    ([`SfmOptions::max_query_points`]) are tracked by patch NCC + Lucas–Kanade into its
+//!    best-overlapping views ([`SfmOptions::track_neighbours`], found from thumbnail correlation,
+//!    not from the file order), each point from the view of its track nearest the target, so
+//!    tracks stay long; every tracked pair is verified by a fundamental-matrix RANSAC;
+//! 4. the initial pair maximises inliers × parallax (up to 6°); its essential matrix gives the
+//!    first two poses; further views are added by RANSAC PnP, tracks are triangulated with angle,
 //!    depth and reprojection checks, and a robust (Huber) Levenberg–Marquardt bundle adjustment
 //!    with a Schur complement over points runs after each registration ([`ba`]);
-//! 4. the focal length is taken from [`SfmOptions::focal_px`] when known; otherwise a
+//! 5. the focal length is taken from [`SfmOptions::focal_px`] when known; otherwise a
 //!    reconstruction is made with each candidate of [`SfmOptions::focal_candidates`] held fixed
-//!    (a free focal drifts along its weak direction under blur), the one registering most views
-//!    with the lowest error wins, and a final bundle adjustment refines the focal inside the
-//!    bracket of its neighbouring candidates. Each working size is tried in turn until all views
-//!    register.
+//!    (a free focal drifts along its weak direction under blur). The one registering most views
+//!    wins; candidates whose mean errors are within 1 % of the best are ties (under blur the error
+//!    is nearly flat in the focal) decided by a 53° field-of-view prior; a final bundle
+//!    adjustment refines the focal inside the bracket of the neighbouring candidates.
 //!
 //! Every input view is either registered or listed in [`SfmStats::unregistered`]. Fewer than two
 //! registered views is an error ([`SfmError::TooFewRegistered`]), as are degenerate inputs.
