@@ -82,8 +82,8 @@ pub struct SfmOptions {
     pub grid_spacing_frac: f32,
     /// Best-overlapping views each view's points are tracked into.
     pub track_neighbours: usize,
-    /// Tracking query points per view: its keypoints, then grid points, up to this many (the
-    /// cost of tracking grows with it).
+    /// Tracking query points per view: its keypoints, then (only when they are fewer than a
+    /// third of this) grid points, up to this many (the cost of tracking grows with it).
     pub max_query_points: usize,
     /// Seed of every random choice (RANSAC); same seed, same result.
     pub seed: u64,
@@ -655,7 +655,9 @@ fn all_tracks(
         // Keypoints come strongest-first per grid cell; beyond the budget they are dropped.
         let mut pts = feats[i].xy.clone();
         pts.truncate(opts.max_query_points);
-        if opts.grid_spacing_frac > 0.0 {
+        // Grid points stand in for corners that blur has wiped out; where corners are plentiful
+        // they only add less precisely localised patches.
+        if opts.grid_spacing_frac > 0.0 && pts.len() < opts.max_query_points / 3 {
             let spacing = ((wl * opts.grid_spacing_frac).round() as usize).max(2);
             let budget = opts.max_query_points.saturating_sub(pts.len());
             let grid =
