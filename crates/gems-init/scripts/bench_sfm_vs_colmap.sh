@@ -6,7 +6,7 @@
 set -euo pipefail
 work=${1:-/tmp/gems_sfm_bench}
 shift || true
-seeds=${*:-"1 2"}
+seeds=${*:-"1 2 3 4"}
 cd "$(dirname "$0")/../../.."
 mkdir -p "$work"
 cargo build --release -p gems-init --example sfm_bench
