@@ -100,7 +100,7 @@ impl Default for SfmOptions {
             max_reproj_px: 2.0,
             min_tri_angle_deg: 1.0,
             grid_spacing_frac: 0.04,
-            track_neighbours: 16,
+            track_neighbours: 8,
             max_query_points: 300,
             seed: 0,
         }
