@@ -166,7 +166,7 @@ impl Default for InitConfig {
             scale_factor: 0.1,
             knn: 3,
             random_points: 100_000,
-            min_points: 10_000,
+            min_points: 20_000,
             top_up: TopUp::NearPoints,
             random_near: 0.1,
             random_far: 3.0,
