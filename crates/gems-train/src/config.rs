@@ -137,9 +137,9 @@ pub struct InitConfig {
     pub knn: usize,
     /// Number of points for random initialisation (no SfM points); at most `mcmc.cap_max`.
     pub random_points: usize,
-    /// An SfM cloud sparser than this is topped up with random points inside the camera
-    /// frustums, at the depths its points occupy (blurry images give sparse clouds, and MCMC
-    /// grows a set by only 5 % per refinement); at most `mcmc.cap_max`.
+    /// An SfM cloud sparser than this is topped up to this many points as `top_up` says
+    /// (blurry images give sparse clouds, and MCMC grows a set by only 5 % per refinement);
+    /// at most `mcmc.cap_max`.
     pub min_points: usize,
     /// Where the top-up points of a sparse SfM cloud go.
     pub top_up: TopUp,
