@@ -7,7 +7,6 @@
 //! mismatched pair.
 
 use std::collections::HashMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use gems_math::{Se3, Trajectory};
@@ -23,29 +22,15 @@ use crate::mcmc::GaussianAdam;
 use crate::normalize::Normalization;
 use crate::trainer::{History, TrainState, TrainView, Trainer, math_kind};
 
-/// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename).
+/// Writes `bytes` to `path` atomically (gems-data's temporary file + rename).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).map_err(|e| TrainError::io(dir, e))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(TrainError::io(path, e));
-    }
-    Ok(())
+    gems_data::write_atomic(path, bytes).map_err(|e| match e {
+        gems_data::DataError::Io { path, source } => TrainError::Io { path, source },
+        other => TrainError::Format {
+            path: path.to_path_buf(),
+            reason: other.to_string(),
+        },
+    })
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, TrainError> {
