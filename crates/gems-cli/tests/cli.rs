@@ -28,6 +28,18 @@ fn ok(out: &Output) {
     );
 }
 
+/// `gems train <scene> -o <out> <extra…>`.
+fn train(scene: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "train",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    gems(&args)
+}
+
 fn tiny_scene(dir: &Path) -> PathBuf {
     let scene = dir.join("scene");
     ok(&gems(&[
@@ -59,18 +71,18 @@ fn train_from_colmap_cli_with_and_without_events() {
     let colmap = fake_colmap(dir.path(), &scene.join("gt/sparse/0"));
 
     let out = dir.path().join("run");
-    ok(&gems(&[
-        "train",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--init",
-        "colmap-cli",
-        "--colmap-binary",
-        colmap.to_str().unwrap(),
-        "--steps",
-        "30",
-    ]));
+    ok(&train(
+        &scene,
+        &out,
+        &[
+            "--init",
+            "colmap-cli",
+            "--colmap-binary",
+            colmap.to_str().unwrap(),
+            "--steps",
+            "30",
+        ],
+    ));
     assert!(out.join("colmap/sparse/0/images.bin").is_file());
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
@@ -79,35 +91,35 @@ fn train_from_colmap_cli_with_and_without_events() {
     assert!(!html.contains("EDI from events"));
 
     // --resume reuses the imported model: COLMAP is not run again (here it could not be).
-    ok(&gems(&[
-        "train",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--init",
-        "colmap-cli",
-        "--colmap-binary",
-        "/nonexistent/colmap",
-        "--steps",
-        "30",
-        "--resume",
-    ]));
+    ok(&train(
+        &scene,
+        &out,
+        &[
+            "--init",
+            "colmap-cli",
+            "--colmap-binary",
+            "/nonexistent/colmap",
+            "--steps",
+            "30",
+            "--resume",
+        ],
+    ));
 
     // With events: EDI images feed COLMAP, the report shows them in their own column.
     let out = dir.path().join("run_events");
-    ok(&gems(&[
-        "train",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--init",
-        "colmap-cli",
-        "--colmap-binary",
-        colmap.to_str().unwrap(),
-        "--events",
-        "--steps",
-        "30",
-    ]));
+    ok(&train(
+        &scene,
+        &out,
+        &[
+            "--init",
+            "colmap-cli",
+            "--colmap-binary",
+            colmap.to_str().unwrap(),
+            "--events",
+            "--steps",
+            "30",
+        ],
+    ));
     let n_edi = std::fs::read_dir(out.join("edi/images")).unwrap().count();
     assert_eq!(
         n_edi,
@@ -135,14 +147,7 @@ fn train_from_colmap_cli_with_and_without_events() {
 fn bad_input_gives_one_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("no-such-scene");
-    let out = gems(&[
-        "train",
-        missing.to_str().unwrap(),
-        "-o",
-        dir.path().join("run").to_str().unwrap(),
-        "--steps",
-        "5",
-    ]);
+    let out = train(&missing, &dir.path().join("run"), &["--steps", "5"]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -152,22 +157,35 @@ fn bad_input_gives_one_clear_error() {
 
     // A COLMAP that is not installed: the error names the executable.
     let scene = tiny_scene(dir.path());
-    let out = gems(&[
-        "train",
-        scene.to_str().unwrap(),
-        "-o",
-        dir.path().join("run2").to_str().unwrap(),
-        "--init",
-        "colmap-cli",
-        "--colmap-binary",
-        "/nonexistent/colmap",
-        "--steps",
-        "5",
-    ]);
+    let out = train(
+        &scene,
+        &dir.path().join("run2"),
+        &[
+            "--init",
+            "colmap-cli",
+            "--colmap-binary",
+            "/nonexistent/colmap",
+            "--steps",
+            "5",
+        ],
+    );
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("/nonexistent/colmap") && !err.contains("panicked"),
+        "{err}"
+    );
+
+    // --events needs an initialiser that reads the deblurred images.
+    let out = train(
+        &scene,
+        &dir.path().join("run3"),
+        &["--init", "gt", "--events"],
+    );
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--events") && !err.contains("panicked"),
         "{err}"
     );
 }
