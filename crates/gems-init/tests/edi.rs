@@ -282,20 +282,20 @@ fn texture(x: f32, y: f32) -> f32 {
     v.clamp(0.02, 1.0)
 }
 
-fn moving_texture(c: f32, blur_px: f32) -> MovingTexture {
-    let (w, h) = (64usize, 48usize);
-    let frames = 241usize;
-    let t_end = 24_000i64;
-    let shift = |k: usize| blur_px * (k as f32 / (frames - 1) as f32 - 0.5);
-    let render = |k: usize| -> Vec<f32> {
-        (0..w * h)
-            .map(|i| texture((i % w) as f32 + 0.5 - shift(k), (i / w) as f32 + 0.5))
-            .collect()
-    };
+/// Feeds `frames` equally spaced sharp frames over `[0, t_end]` µs to the event simulator and
+/// returns the blurry image (the time integral of the piecewise-linear signal: trapezoid
+/// weights) and the events.
+fn expose(
+    render: &dyn Fn(usize) -> Vec<f32>,
+    frames: usize,
+    t_end: i64,
+    (c_pos, c_neg): (f32, f32),
+    (w, h): (usize, usize),
+) -> (Vec<f32>, EventStream) {
     let mut sim = Simulator::new(
         SimConfig {
-            c_pos: c,
-            c_neg: c,
+            c_pos,
+            c_neg,
             ..SimConfig::default()
         },
         w as u16,
@@ -305,7 +305,6 @@ fn moving_texture(c: f32, blur_px: f32) -> MovingTexture {
     let mut sum = vec![0f64; w * h];
     for k in 0..frames {
         let f = render(k);
-        // trapezoid weights: the blur is the time integral of the piecewise-linear signal
         let wgt = if k == 0 || k == frames - 1 { 0.5 } else { 1.0 };
         for (s, &v) in sum.iter_mut().zip(&f) {
             *s += wgt * f64::from(v);
@@ -317,13 +316,27 @@ fn moving_texture(c: f32, blur_px: f32) -> MovingTexture {
         .iter()
         .map(|&s| (s / (frames - 1) as f64) as f32)
         .collect();
+    (blurry, sim.finish())
+}
+
+fn moving_texture(c: f32, blur_px: f32) -> MovingTexture {
+    let (w, h) = (64usize, 48usize);
+    let frames = 241usize;
+    let t_end = 24_000i64;
+    let shift = |k: usize| blur_px * (k as f32 / (frames - 1) as f32 - 0.5);
+    let render = |k: usize| -> Vec<f32> {
+        (0..w * h)
+            .map(|i| texture((i % w) as f32 + 0.5 - shift(k), (i / w) as f32 + 0.5))
+            .collect()
+    };
+    let (blurry, events) = expose(&render, frames, t_end, (c, c), (w, h));
     MovingTexture {
         w,
         h,
         t_end,
         blurry,
         sharp_mid: render(frames / 2),
-        events: sim.finish(),
+        events,
     }
 }
 
@@ -422,31 +435,7 @@ fn moving_leaves(c_pos: f32, c_neg: f32, blur_px: f32, seed: u64) -> (Image, Pix
             })
             .collect()
     };
-    let mut sim = Simulator::new(
-        SimConfig {
-            c_pos,
-            c_neg,
-            ..SimConfig::default()
-        },
-        w as u16,
-        h as u16,
-    )
-    .unwrap();
-    let mut sum = vec![0f64; w * h];
-    for k in 0..frames {
-        let f = render(k);
-        let wgt = if k == 0 || k == frames - 1 { 0.5 } else { 1.0 };
-        for (s, &v) in sum.iter_mut().zip(&f) {
-            *s += wgt * f64::from(v);
-        }
-        sim.feed_luma(&f, t_end * k as i64 / (frames - 1) as i64)
-            .unwrap();
-    }
-    let blurry = sum
-        .iter()
-        .map(|&s| (s / (frames - 1) as f64) as f32)
-        .collect();
-    let events = sim.finish();
+    let (blurry, events) = expose(&render, frames, t_end, (c_pos, c_neg), (w, h));
     let pe = PixelEvents::new(events.as_slice(), 0, t_end).unwrap();
     (gray(w, h, blurry), pe, t_end / 2)
 }
