@@ -7,7 +7,7 @@ use proptest::prelude::*;
 
 const AEDAT: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/testdata/events/davis346_street.aedat4"
+    "/../../testdata/events/davis346_street.aedat4"
 );
 
 fn sample_stream() -> EventStream {

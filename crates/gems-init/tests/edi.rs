@@ -6,7 +6,7 @@ use gems_init::edi::*;
 
 const AEDAT: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/testdata/events/davis346_street.aedat4"
+    "/../../testdata/events/davis346_street.aedat4"
 );
 
 fn gray(w: usize, h: usize, v: Vec<f32>) -> Image {

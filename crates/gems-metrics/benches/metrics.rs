@@ -38,7 +38,7 @@ fn lpips_alex_400x270(bencher: divan::Bencher) {
     let (r, t) = (image(h, w, 1), image(h, w, 2));
     let weights = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/testdata/metrics/lpips_alex_random_weights.safetensors"
+        "/../../testdata/metrics/lpips_alex_random_weights.safetensors"
     );
     let net = gems_metrics::Lpips::load(&[weights]).unwrap();
     bencher.bench_local(|| net.distance(&r, &t, h, w).unwrap());

@@ -3,7 +3,7 @@
 //! - Evaluation ([`ssim`], torchmetrics): the images are reflect-padded by 5 (torch "reflect",
 //!   edge not repeated), the SSIM map is computed for every pixel and averaged over the whole
 //!   image, variances clamped at zero. (Older torchmetrics cropped 5 pixels; the reference vectors
-//!   in shared/testdata were made without the crop, and [`ssim`] matches them.)
+//!   in testdata/ were made without the crop, and [`ssim`] matches them.)
 //! - Training ([`ssim_valid`], fused-ssim `padding="valid"`): zero padding by 5, map cropped by 5,
 //!   so only windows fully inside the image count and the padding never matters.
 //!

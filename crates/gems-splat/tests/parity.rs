@@ -1,4 +1,4 @@
-//! Parity with gsplat 1.5.3 (f64 reference vectors in shared/testdata/splat): forward outputs,
+//! Parity with gsplat 1.5.3 (f64 reference vectors in testdata/splat): forward outputs,
 //! radii/culling and every gradient, for the fast renderer and the f64 reference.
 
 #![allow(clippy::needless_range_loop)]

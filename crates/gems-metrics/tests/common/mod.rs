@@ -1,15 +1,15 @@
-//! Loading of the reference vectors in shared/testdata/metrics.
+//! Loading of the reference vectors in testdata/metrics (repository root).
 #![allow(dead_code)]
 
 use std::collections::HashMap;
 
 pub const PAIRS: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/testdata/metrics/metrics_pairs.safetensors"
+    "/../../testdata/metrics/metrics_pairs.safetensors"
 );
 pub const LPIPS_WEIGHTS: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/testdata/metrics/lpips_alex_random_weights.safetensors"
+    "/../../testdata/metrics/lpips_alex_random_weights.safetensors"
 );
 
 pub struct Pair {

@@ -17,7 +17,7 @@ pub struct Case {
 impl Case {
     pub fn load(name: &str) -> Case {
         let path = format!(
-            "{}/../../../shared/testdata/splat/{name}.safetensors",
+            "{}/../../testdata/splat/{name}.safetensors",
             env!("CARGO_MANIFEST_DIR")
         );
         let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
