@@ -1,0 +1,150 @@
+//! Adapter selection and the device/queue pair every kernel runs on.
+
+use crate::GpuError;
+
+/// Which engine to run on, as given by `--device`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DeviceChoice {
+    /// A hardware GPU when one exists, else the CPU engine. Software adapters (Mesa lavapipe,
+    /// WARP, SwiftShader) are never taken automatically: they are slower than the CPU engine.
+    #[default]
+    Auto,
+    /// The CPU engine.
+    Cpu,
+    /// A GPU adapter, software ones included (that is how CI tests the GPU path on lavapipe);
+    /// an error when there is none.
+    Gpu,
+}
+
+impl std::str::FromStr for DeviceChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "auto" => Ok(DeviceChoice::Auto),
+            "cpu" => Ok(DeviceChoice::Cpu),
+            "gpu" => Ok(DeviceChoice::Gpu),
+            other => Err(format!(
+                "unknown device {other:?}: expected auto, cpu or gpu"
+            )),
+        }
+    }
+}
+
+/// What a user needs to know about the adapter a run uses.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct AdapterSummary {
+    pub name: String,
+    pub backend: String,
+    pub device_type: String,
+    pub driver: String,
+    /// A CPU (software) implementation such as lavapipe.
+    pub is_software: bool,
+}
+
+impl std::fmt::Display for AdapterSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} ({}, {}, {})",
+            self.name, self.backend, self.device_type, self.driver
+        )
+    }
+}
+
+/// One wgpu device and queue.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter: AdapterSummary,
+    /// `SHADER_FLOAT32_ATOMIC` is enabled: kernels may use `atomic<f32>` adds; otherwise they
+    /// fall back to a compare-and-swap loop on `atomic<u32>`.
+    pub float_atomics: bool,
+    /// The device's limits (as requested: the adapter's own).
+    pub limits: wgpu::Limits,
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuContext")
+            .field("adapter", &self.adapter)
+            .field("float_atomics", &self.float_atomics)
+            .finish_non_exhaustive()
+    }
+}
+
+impl GpuContext {
+    /// Opens the best adapter wgpu offers (high performance), software adapters included.
+    /// `WGPU_BACKEND` (e.g. `vulkan`) restricts the backends probed.
+    pub fn new() -> Result<Self, GpuError> {
+        Self::open(true)
+    }
+
+    fn open(allow_software: bool) -> Result<Self, GpuError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let summary = AdapterSummary {
+            name: info.name.clone(),
+            backend: format!("{:?}", info.backend),
+            device_type: format!("{:?}", info.device_type),
+            driver: format!("{} {}", info.driver, info.driver_info)
+                .trim()
+                .to_string(),
+            is_software: info.device_type == wgpu::DeviceType::Cpu,
+        };
+        if summary.is_software && !allow_software {
+            return Err(GpuError::NoAdapter(format!(
+                "only a software adapter was found: {summary}"
+            )));
+        }
+        let float_atomics = adapter
+            .features()
+            .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC);
+        let mut features = wgpu::Features::empty();
+        if float_atomics {
+            features |= wgpu::Features::SHADER_FLOAT32_ATOMIC;
+        }
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("gems"),
+            required_features: features,
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device {
+            adapter: summary.to_string(),
+            reason: e.to_string(),
+        })?;
+        Ok(GpuContext {
+            device,
+            queue,
+            adapter: summary,
+            float_atomics,
+            limits,
+        })
+    }
+}
+
+/// The context for a [`DeviceChoice`]: `Ok(None)` means "use the CPU engine".
+///
+/// `Auto` takes a hardware adapter when one exists and otherwise falls back to the CPU quietly;
+/// `Gpu` takes any adapter and is an error when there is none.
+pub fn select(choice: DeviceChoice) -> Result<Option<GpuContext>, GpuError> {
+    match choice {
+        DeviceChoice::Cpu => Ok(None),
+        DeviceChoice::Gpu => GpuContext::new().map(Some),
+        DeviceChoice::Auto => match GpuContext::open(false) {
+            Ok(ctx) => Ok(Some(ctx)),
+            Err(e) => {
+                tracing::debug!("no hardware GPU adapter, using the CPU: {e}");
+                Ok(None)
+            }
+        },
+    }
+}
