@@ -7,10 +7,39 @@
 //! * [`GpuContext`] — one wgpu device and queue, with the adapter it runs on ([`AdapterSummary`])
 //!   and the optional features that the kernels use when the adapter has them.
 //! * [`select`] — turns a [`DeviceChoice`] into a context, or `None` for the CPU engine.
+//! * [`GpuRenderer`] — the splatting engine (forward and backward, pose gradients included)
+//!   with the contract of `gems_splat::Renderer`; one WGSL compute shader per stage and
+//!   direction under `shaders/`.
+//! * [`ImageBatch`] — images resident on the GPU, for steps that keep `dL/dRGB` there.
+//!
+//! Reproducibility: no kernel adds floats atomically; every sum (per tile entry over the
+//! tile's pixels, per Gaussian over its tile entries and cameras, per camera over Gaussians and
+//! pixels) runs in a fixed order, so the same inputs on the same adapter and driver give the
+//! same bits. Different adapters or drivers may differ in the last bits (`exp`, fused
+//! multiply-adds chosen by the shader compiler).
 
 mod context;
+mod kernels;
+mod renderer;
 
 pub use context::{AdapterSummary, DeviceChoice, GpuContext, select};
+pub use renderer::GpuRenderer;
+
+/// A batch of `count` RGB images of `width`×`height` on the GPU.
+///
+/// Layout of `buffer`: `[count, height, width, 3]` little-endian `f32`, rows top to bottom,
+/// channels interleaved (the layout of `gems_splat::RenderOutput::rgb`); the buffer may be
+/// longer than that. [`GpuRenderer::forward_images`] returns the rendered images this way
+/// (sharing the engine's output buffer, valid until its next forward call), and
+/// [`GpuRenderer::backward_images`] takes `dL/dRGB` this way. A buffer passed in needs
+/// `STORAGE` usage.
+#[derive(Clone, Debug)]
+pub struct ImageBatch {
+    pub buffer: wgpu::Buffer,
+    pub count: usize,
+    pub width: u32,
+    pub height: u32,
+}
 
 /// Errors of the GPU backend.
 #[derive(Debug, thiserror::Error)]

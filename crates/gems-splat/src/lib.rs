@@ -316,7 +316,10 @@ pub struct Gradients {
     pub visible_count: Vec<u32>,
 }
 
-pub(crate) fn check_inputs(
+/// Checks one render call's inputs as [`Renderer::forward`] does (valid scene, at least one
+/// camera, valid cameras all of one size, one background per camera); returns the image size.
+/// Public so that other engines (the GPU one) apply exactly the same rules.
+pub fn check_inputs(
     g: &Gaussians,
     cams: &[Camera],
     backgrounds: &[[f32; 3]],

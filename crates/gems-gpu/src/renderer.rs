@@ -1,0 +1,768 @@
+//! [`GpuRenderer`]: the splatting engine on the GPU, with the CPU engine's contract.
+//!
+//! Forward: `project_forward` (per camera × Gaussian: splat, radii, tile count) → exclusive
+//! prefix sum of the tile counts → `map_intersections` (one entry per overlapped tile, key =
+//! (camera·tiles + tile, depth bits)) → stable LSD radix sort, 8 bits per pass, depth bits
+//! first and the tile bits last, so entries end up by (camera, tile, depth, Gaussian index), the
+//! CPU engine's order → `tile_ranges` → `rasterize_forward` (a workgroup per camera × tile,
+//! splats staged in workgroup memory).
+//!
+//! Backward: `rasterize_backward` replays each tile back to front and writes each tile entry's
+//! gradient (summed over the tile's pixels in workgroup memory) to its own slot →
+//! `sum_intersections` adds each Gaussian's entries in tile order → `project_backward`
+//! (per Gaussian over the cameras; SH, covariance, quaternion, pose shares) →
+//! `reduce_segments` (pose gradient per camera) and `background_backward`.
+//!
+//! No stage uses atomics on floats: every sum has a fixed order, so the same inputs on the
+//! same adapter and driver give the same bits. Results differ from the CPU engine by float
+//! rounding (f32 projection here, f64 there; `exp` of the driver) within the parity tolerances.
+
+use gems_splat::{
+    Camera, Gaussians, Gradients, RenderOutput, RenderSettings, SH_COEFFS, SplatError, check_inputs,
+};
+
+use crate::kernels::{Kernels, Params, Resident, WG, dispatch, f32s, groups_for, read_back, u32s};
+use crate::{AdapterSummary, GpuContext, GpuError, ImageBatch};
+
+/// Floats per Gaussian in the packed parameter buffer (see `shaders/common.wgsl`).
+const GP: usize = 59;
+/// Floats per camera in the packed camera buffer.
+const CAMF: usize = 24;
+/// Floats per screen-space gradient.
+const SG: u64 = 9;
+/// Bytes per splat (`struct Splat`).
+const SPLAT_BYTES: u64 = 64;
+/// Tile edge in pixels.
+const TILE: u32 = 16;
+
+/// What `backward` needs from the last `forward`.
+#[derive(Clone, Copy, Default)]
+struct Saved {
+    valid: bool,
+    num_gaussians: usize,
+    num_cameras: usize,
+    width: u32,
+    height: u32,
+    intersections: u64,
+    settings: Option<RenderSettings>,
+}
+
+/// Resident buffers, reused (grown when needed) across calls.
+struct Buffers {
+    gaussians: Resident,
+    cams: Resident,
+    splats: Resident,
+    radii: Resident,
+    offsets: Resident,
+    scan_levels: Vec<Resident>,
+    key_lo: [Resident; 2],
+    key_hi: [Resident; 2],
+    vals: [Resident; 2],
+    owner: Resident,
+    histogram: Resident,
+    ranges: Resident,
+    sorted_splat: Resident,
+    sorted_pos: Resident,
+    rgb: Resident,
+    aux: Resident,
+    d_rgb: Resident,
+    d_alpha: Resident,
+    entry_grads: Resident,
+    splat_grads: Resident,
+    grads: Resident,
+    stats: Resident,
+    pose_parts: Resident,
+    pose: Resident,
+    bg_grads: Resident,
+}
+
+impl Buffers {
+    fn new() -> Self {
+        Buffers {
+            gaussians: Resident::new("gaussians"),
+            cams: Resident::new("cameras"),
+            splats: Resident::new("splats"),
+            radii: Resident::new("radii"),
+            offsets: Resident::new("tile offsets"),
+            scan_levels: Vec::new(),
+            key_lo: [Resident::new("keys lo"), Resident::new("keys lo (2)")],
+            key_hi: [Resident::new("keys hi"), Resident::new("keys hi (2)")],
+            vals: [Resident::new("values"), Resident::new("values (2)")],
+            owner: Resident::new("entry owner"),
+            histogram: Resident::new("radix histogram"),
+            ranges: Resident::new("tile ranges"),
+            sorted_splat: Resident::new("sorted splat"),
+            sorted_pos: Resident::new("sorted position"),
+            rgb: Resident::new("rgb"),
+            aux: Resident::new("pixel state"),
+            d_rgb: Resident::new("dL/dRGB"),
+            d_alpha: Resident::new("dL/dalpha"),
+            entry_grads: Resident::new("tile entry gradients"),
+            splat_grads: Resident::new("splat gradients"),
+            grads: Resident::new("gaussian gradients"),
+            stats: Resident::new("densification statistics"),
+            pose_parts: Resident::new("pose gradient parts"),
+            pose: Resident::new("pose gradients"),
+            bg_grads: Resident::new("background gradients"),
+        }
+    }
+}
+
+/// The GPU splatting engine: same inputs, outputs and rules as [`gems_splat::Renderer`].
+///
+/// [`GpuRenderer::forward`] renders C cameras of one scene (all of one size) and remembers
+/// what [`GpuRenderer::backward`] needs; the buffer-level variants
+/// ([`GpuRenderer::forward_images`], [`GpuRenderer::backward_images`]) keep the images and
+/// `dL/dRGB` on the GPU as [`ImageBatch`]es.
+pub struct GpuRenderer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    limits: wgpu::Limits,
+    adapter: AdapterSummary,
+    kernels: Kernels,
+    bufs: Buffers,
+    saved: Saved,
+}
+
+impl std::fmt::Debug for GpuRenderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuRenderer")
+            .field("adapter", &self.adapter)
+            .finish_non_exhaustive()
+    }
+}
+
+fn params_for(
+    n: usize,
+    nc: usize,
+    width: u32,
+    height: u32,
+    sh_degree: u32,
+    s: &RenderSettings,
+) -> Params {
+    Params {
+        num_gaussians: n as u32,
+        num_cameras: nc as u32,
+        width,
+        height,
+        tiles_x: width.div_ceil(TILE),
+        tiles_y: height.div_ceil(TILE),
+        sh_degree,
+        antialiased: s.antialiased as u32,
+        eps2d: s.eps2d,
+        near_plane: s.near_plane,
+        far_plane: s.far_plane,
+        alpha_max: s.alpha_max,
+        alpha_min: s.alpha_min,
+        t_min: s.transmittance_min,
+        radius_extent: s.radius_extent,
+        ..Params::default()
+    }
+}
+
+impl GpuRenderer {
+    /// Compiles the kernels on `ctx`'s device.
+    pub fn new(ctx: &GpuContext) -> Self {
+        GpuRenderer {
+            device: ctx.device.clone(),
+            queue: ctx.queue.clone(),
+            limits: ctx.limits.clone(),
+            adapter: ctx.adapter.clone(),
+            kernels: Kernels::new(&ctx.device),
+            bufs: Buffers::new(),
+            saved: Saved::default(),
+        }
+    }
+
+    /// Number of (camera, Gaussian, tile) entries the last forward call sorted and rasterised.
+    pub fn intersections(&self) -> u64 {
+        self.saved.intersections
+    }
+
+    /// The adapter the engine runs on.
+    pub fn adapter(&self) -> &AdapterSummary {
+        &self.adapter
+    }
+
+    /// Renders `g` from every camera over its background; mirrors
+    /// [`gems_splat::Renderer::forward`].
+    pub fn forward(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        backgrounds: &[[f32; 3]],
+        s: &RenderSettings,
+    ) -> Result<RenderOutput, GpuError> {
+        self.run_forward(g, cams, backgrounds, s)?;
+        let sv = self.saved;
+        let (nc, n) = (sv.num_cameras, sv.num_gaussians);
+        let pixels = (nc * sv.width as usize * sv.height as usize) as u64;
+        let encoder = self.device.create_command_encoder(&Default::default());
+        let bytes = read_back(
+            &self.device,
+            &self.queue,
+            encoder,
+            &[
+                (self.bufs.rgb.get(), 0, pixels * 12),
+                (self.bufs.aux.get(), 0, pixels * 16),
+                (self.bufs.radii.get(), 0, (nc * n) as u64 * 8),
+            ],
+        )?;
+        let rgb = f32s(&bytes[0]);
+        let aux = f32s(&bytes[1]);
+        let radii_flat = u32s(&bytes[2]);
+        let alpha = aux.chunks_exact(4).map(|p| p[0]).collect();
+        let depth = s
+            .compute_depth
+            .then(|| aux.chunks_exact(4).map(|p| p[1]).collect());
+        let radii = radii_flat
+            .chunks_exact(2)
+            .map(|r| [r[0] as i32, r[1] as i32])
+            .collect();
+        Ok(RenderOutput {
+            width: sv.width,
+            height: sv.height,
+            num_cameras: nc,
+            rgb,
+            alpha,
+            depth,
+            radii,
+        })
+    }
+
+    /// Like [`GpuRenderer::forward`] but leaves the RGB images on the GPU. The batch shares
+    /// the engine's output buffer: it is valid until the next forward call.
+    pub fn forward_images(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        backgrounds: &[[f32; 3]],
+        s: &RenderSettings,
+    ) -> Result<ImageBatch, GpuError> {
+        self.run_forward(g, cams, backgrounds, s)?;
+        Ok(ImageBatch {
+            buffer: self.bufs.rgb.get().clone(),
+            count: self.saved.num_cameras,
+            width: self.saved.width,
+            height: self.saved.height,
+        })
+    }
+
+    fn run_forward(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        backgrounds: &[[f32; 3]],
+        s: &RenderSettings,
+    ) -> Result<(), GpuError> {
+        self.saved.valid = false;
+        let (width, height) = check_inputs(g, cams, backgrounds)?;
+        let (n, nc) = (g.len(), cams.len());
+        let mut p = params_for(n, nc, width, height, g.sh_degree, s);
+        let tiles = (p.tiles_x * p.tiles_y) as usize;
+        let pairs = nc * n;
+        if pairs as u64 >= u32::MAX as u64 || (nc * tiles) as u64 >= u32::MAX as u64 {
+            return Err(GpuError::Shape(format!(
+                "{nc} cameras × {n} Gaussians is too large for one call"
+            )));
+        }
+        let pixels = (nc * width as usize * height as usize) as u64;
+        let (dev, lim) = (&self.device, &self.limits);
+        let b = &mut self.bufs;
+
+        // Uploads.
+        let mut packed = Vec::with_capacity(n * GP);
+        for i in 0..n {
+            packed.extend_from_slice(&g.means[i]);
+            packed.extend_from_slice(&g.quats[i]);
+            packed.extend_from_slice(&g.log_scales[i]);
+            packed.push(g.opacity_logits[i]);
+            packed.extend(g.sh[i].iter().flatten());
+        }
+        let gauss = b.gaussians.ensure(dev, lim, (n * GP * 4) as u64)?;
+        if !packed.is_empty() {
+            self.queue
+                .write_buffer(gauss, 0, bytemuck::cast_slice(&packed));
+        }
+        let mut cam_data = Vec::with_capacity(nc * CAMF);
+        for (c, bg) in cams.iter().zip(backgrounds) {
+            cam_data.extend_from_slice(&[c.fx, c.fy, c.cx, c.cy]);
+            cam_data.extend(c.rotation.iter().flatten());
+            cam_data.extend_from_slice(&c.translation);
+            cam_data.extend_from_slice(bg);
+            cam_data.extend_from_slice(&[0.0; 5]);
+        }
+        let camb = b.cams.ensure(dev, lim, (nc * CAMF * 4) as u64)?;
+        self.queue
+            .write_buffer(camb, 0, bytemuck::cast_slice(&cam_data));
+
+        // Projection and tile counts, prefix sum, total read back to size the sort.
+        b.splats.ensure(dev, lim, pairs as u64 * SPLAT_BYTES)?;
+        b.radii.ensure(dev, lim, pairs as u64 * 8)?;
+        b.offsets.ensure(dev, lim, (pairs as u64 + 1) * 4)?;
+        let mut enc = dev.create_command_encoder(&Default::default());
+        dispatch(
+            dev,
+            &mut enc,
+            &self.kernels.project_forward,
+            &p,
+            &[
+                b.gaussians.get(),
+                b.cams.get(),
+                b.splats.get(),
+                b.radii.get(),
+                b.offsets.get(),
+            ],
+            groups_for(pairs + 1),
+        );
+        encode_scan(
+            dev,
+            lim,
+            &self.kernels,
+            &mut enc,
+            &mut b.scan_levels,
+            b.offsets.get(),
+            pairs + 1,
+        )?;
+        let total_bytes = read_back(
+            dev,
+            &self.queue,
+            enc,
+            &[(b.offsets.get(), pairs as u64 * 4, 4)],
+        )?;
+        let total = u32s(&total_bytes[0])[0] as u64;
+
+        let mut enc = dev.create_command_encoder(&Default::default());
+        b.ranges.ensure(dev, lim, (nc * tiles) as u64 * 8)?;
+        enc.clear_buffer(b.ranges.get(), 0, None);
+        b.sorted_splat.ensure(dev, lim, total * 4)?;
+        b.sorted_pos.ensure(dev, lim, total * 4)?;
+        if total > 0 {
+            for k in 0..2 {
+                b.key_lo[k].ensure(dev, lim, total * 4)?;
+                b.key_hi[k].ensure(dev, lim, total * 4)?;
+                b.vals[k].ensure(dev, lim, total * 4)?;
+            }
+            b.owner.ensure(dev, lim, total * 4)?;
+            p.n = pairs as u32;
+            dispatch(
+                dev,
+                &mut enc,
+                &self.kernels.map_intersections,
+                &p,
+                &[
+                    b.splats.get(),
+                    b.offsets.get(),
+                    b.key_lo[0].get(),
+                    b.key_hi[0].get(),
+                    b.vals[0].get(),
+                    b.owner.get(),
+                ],
+                groups_for(pairs),
+            );
+            let cur = encode_sort(
+                dev,
+                lim,
+                &self.kernels,
+                &mut enc,
+                b,
+                total as usize,
+                (nc * tiles) as u32,
+            )?;
+            p.n = total as u32;
+            dispatch(
+                dev,
+                &mut enc,
+                &self.kernels.tile_ranges,
+                &p,
+                &[
+                    b.key_hi[cur].get(),
+                    b.vals[cur].get(),
+                    b.owner.get(),
+                    b.ranges.get(),
+                    b.sorted_splat.get(),
+                    b.sorted_pos.get(),
+                ],
+                groups_for(total as usize),
+            );
+        }
+        b.rgb.ensure(dev, lim, pixels * 12)?;
+        b.aux.ensure(dev, lim, pixels * 16)?;
+        dispatch(
+            dev,
+            &mut enc,
+            &self.kernels.rasterize_forward,
+            &p,
+            &[
+                b.splats.get(),
+                b.sorted_splat.get(),
+                b.ranges.get(),
+                b.cams.get(),
+                b.rgb.get(),
+                b.aux.get(),
+            ],
+            (nc * tiles) as u32,
+        );
+        self.queue.submit([enc.finish()]);
+        self.saved = Saved {
+            valid: true,
+            num_gaussians: n,
+            num_cameras: nc,
+            width,
+            height,
+            intersections: total,
+            settings: Some(*s),
+        };
+        Ok(())
+    }
+
+    /// Backward of the last forward call (same `g`, `cams`, `backgrounds`); mirrors
+    /// [`gems_splat::Renderer::backward`]. `d_rgb` is `[C,H,W,3]`, `d_alpha` `[C,H,W]`.
+    pub fn backward(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        backgrounds: &[[f32; 3]],
+        d_rgb: &[f32],
+        d_alpha: Option<&[f32]>,
+    ) -> Result<Gradients, GpuError> {
+        let sv = self.check_saved(g, cams, backgrounds)?;
+        let pixels = sv.num_cameras * sv.width as usize * sv.height as usize;
+        if d_rgb.len() != pixels * 3 {
+            return Err(SplatError::Shape(format!(
+                "d_rgb has {} values, expected C·H·W·3 = {}",
+                d_rgb.len(),
+                pixels * 3
+            ))
+            .into());
+        }
+        let buf = self
+            .bufs
+            .d_rgb
+            .ensure(&self.device, &self.limits, pixels as u64 * 12)?;
+        self.queue.write_buffer(buf, 0, bytemuck::cast_slice(d_rgb));
+        let batch = ImageBatch {
+            buffer: buf.clone(),
+            count: sv.num_cameras,
+            width: sv.width,
+            height: sv.height,
+        };
+        self.backward_images(g, cams, backgrounds, &batch, d_alpha)
+    }
+
+    /// Backward of the last forward call with `dL/dRGB` already on the GPU.
+    pub fn backward_images(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        backgrounds: &[[f32; 3]],
+        d_rgb: &ImageBatch,
+        d_alpha: Option<&[f32]>,
+    ) -> Result<Gradients, GpuError> {
+        let sv = self.check_saved(g, cams, backgrounds)?;
+        let s = sv.settings.unwrap_or_default();
+        let (n, nc) = (sv.num_gaussians, sv.num_cameras);
+        let pixels = nc * sv.width as usize * sv.height as usize;
+        if d_rgb.count != nc || d_rgb.width != sv.width || d_rgb.height != sv.height {
+            return Err(GpuError::Shape(format!(
+                "dL/dRGB holds {} images of {}x{}, the forward rendered {nc} of {}x{}",
+                d_rgb.count, d_rgb.width, d_rgb.height, sv.width, sv.height
+            )));
+        }
+        if d_rgb.buffer.size() < pixels as u64 * 12 {
+            return Err(GpuError::Shape(format!(
+                "dL/dRGB buffer has {} bytes, expected at least {}",
+                d_rgb.buffer.size(),
+                pixels * 12
+            )));
+        }
+        if let Some(da) = d_alpha
+            && da.len() != pixels
+        {
+            return Err(SplatError::Shape(format!(
+                "d_alpha has {} values, expected C·H·W = {pixels}",
+                da.len()
+            ))
+            .into());
+        }
+        let (dev, lim) = (&self.device, &self.limits);
+        let b = &mut self.bufs;
+        let mut p = params_for(n, nc, sv.width, sv.height, g.sh_degree, &s);
+        let tiles = (p.tiles_x * p.tiles_y) as usize;
+        let da_buf = b
+            .d_alpha
+            .ensure(dev, lim, d_alpha.map_or(4, |d| d.len() as u64 * 4))?;
+        if let Some(da) = d_alpha {
+            p.has_d_alpha = 1;
+            self.queue.write_buffer(da_buf, 0, bytemuck::cast_slice(da));
+        }
+        let total = sv.intersections;
+        b.entry_grads.ensure(dev, lim, total * SG * 4)?;
+        b.splat_grads.ensure(dev, lim, (nc * n) as u64 * SG * 4)?;
+        b.grads.ensure(dev, lim, (n * GP * 4) as u64)?;
+        b.stats.ensure(dev, lim, n as u64 * 8)?;
+        b.pose_parts.ensure(dev, lim, (nc * n) as u64 * 48)?;
+        b.pose.ensure(dev, lim, nc as u64 * 48)?;
+        b.bg_grads.ensure(dev, lim, nc as u64 * 12)?;
+
+        let mut enc = dev.create_command_encoder(&Default::default());
+        enc.clear_buffer(b.entry_grads.get(), 0, None);
+        dispatch(
+            dev,
+            &mut enc,
+            &self.kernels.rasterize_backward,
+            &p,
+            &[
+                b.splats.get(),
+                b.sorted_splat.get(),
+                b.ranges.get(),
+                b.cams.get(),
+                b.aux.get(),
+                &d_rgb.buffer,
+                b.d_alpha.get(),
+                b.entry_grads.get(),
+            ],
+            (nc * tiles) as u32,
+        );
+        p.n = (nc * n) as u32;
+        dispatch(
+            dev,
+            &mut enc,
+            &self.kernels.sum_intersections,
+            &p,
+            &[
+                b.offsets.get(),
+                b.sorted_pos.get(),
+                b.entry_grads.get(),
+                b.splat_grads.get(),
+            ],
+            groups_for(nc * n),
+        );
+        dispatch(
+            dev,
+            &mut enc,
+            &self.kernels.project_backward,
+            &p,
+            &[
+                b.gaussians.get(),
+                b.cams.get(),
+                b.radii.get(),
+                b.splat_grads.get(),
+                b.grads.get(),
+                b.stats.get(),
+                b.pose_parts.get(),
+            ],
+            groups_for(n),
+        );
+        p.num_blocks = nc as u32;
+        p.seg_len = n as u32;
+        p.seg_width = 12;
+        dispatch(
+            dev,
+            &mut enc,
+            &self.kernels.reduce_segments,
+            &p,
+            &[b.pose_parts.get(), b.pose.get()],
+            nc as u32,
+        );
+        dispatch(
+            dev,
+            &mut enc,
+            &self.kernels.background_backward,
+            &p,
+            &[&d_rgb.buffer, b.aux.get(), b.bg_grads.get()],
+            nc as u32,
+        );
+        let bytes = read_back(
+            dev,
+            &self.queue,
+            enc,
+            &[
+                (b.grads.get(), 0, (n * GP * 4) as u64),
+                (b.stats.get(), 0, n as u64 * 8),
+                (b.pose.get(), 0, nc as u64 * 48),
+                (b.bg_grads.get(), 0, nc as u64 * 12),
+            ],
+        )?;
+        let grads = f32s(&bytes[0]);
+        let stats = f32s(&bytes[1]);
+        let pose = f32s(&bytes[2]);
+        let bg = f32s(&bytes[3]);
+        let mut out = Gradients {
+            means: Vec::with_capacity(n),
+            quats: Vec::with_capacity(n),
+            log_scales: Vec::with_capacity(n),
+            opacity_logits: Vec::with_capacity(n),
+            sh: Vec::with_capacity(n),
+            backgrounds: bg.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect(),
+            cam_rotation: Vec::with_capacity(nc),
+            cam_translation: Vec::with_capacity(nc),
+            mean2d_grad_norm: Vec::with_capacity(n),
+            visible_count: Vec::with_capacity(n),
+        };
+        for gi in grads.chunks_exact(GP) {
+            out.means.push([gi[0], gi[1], gi[2]]);
+            out.quats.push([gi[3], gi[4], gi[5], gi[6]]);
+            out.log_scales.push([gi[7], gi[8], gi[9]]);
+            out.opacity_logits.push(gi[10]);
+            let mut sh = [[0.0f32; 3]; SH_COEFFS];
+            for (k, row) in sh.iter_mut().enumerate() {
+                *row = [gi[11 + 3 * k], gi[12 + 3 * k], gi[13 + 3 * k]];
+            }
+            out.sh.push(sh);
+        }
+        for st in stats.chunks_exact(2) {
+            out.mean2d_grad_norm.push(st[0]);
+            out.visible_count.push(st[1].to_bits());
+        }
+        for pc in pose.chunks_exact(12) {
+            out.cam_rotation.push([
+                [pc[0], pc[1], pc[2]],
+                [pc[3], pc[4], pc[5]],
+                [pc[6], pc[7], pc[8]],
+            ]);
+            out.cam_translation.push([pc[9], pc[10], pc[11]]);
+        }
+        Ok(out)
+    }
+
+    fn check_saved(
+        &self,
+        g: &Gaussians,
+        cams: &[Camera],
+        backgrounds: &[[f32; 3]],
+    ) -> Result<Saved, GpuError> {
+        let (width, height) = check_inputs(g, cams, backgrounds)?;
+        let sv = self.saved;
+        if !sv.valid {
+            return Err(SplatError::NoForward("no successful forward call".into()).into());
+        }
+        if sv.num_gaussians != g.len()
+            || sv.num_cameras != cams.len()
+            || sv.width != width
+            || sv.height != height
+        {
+            return Err(SplatError::NoForward(format!(
+                "forward had {} Gaussians, {} cameras of {}x{}; backward got {}, {} of {}x{}",
+                sv.num_gaussians,
+                sv.num_cameras,
+                sv.width,
+                sv.height,
+                g.len(),
+                cams.len(),
+                width,
+                height
+            ))
+            .into());
+        }
+        Ok(sv)
+    }
+}
+
+/// Encodes an in-place exclusive prefix sum of the first `n` u32 of `data`: blocks of 256,
+/// then the block totals scanned the same way (recursively) and added back.
+fn encode_scan(
+    dev: &wgpu::Device,
+    lim: &wgpu::Limits,
+    k: &Kernels,
+    enc: &mut wgpu::CommandEncoder,
+    levels: &mut Vec<Resident>,
+    data: &wgpu::Buffer,
+    n: usize,
+) -> Result<(), GpuError> {
+    encode_scan_level(dev, lim, k, enc, levels, 0, data, n)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn encode_scan_level(
+    dev: &wgpu::Device,
+    lim: &wgpu::Limits,
+    k: &Kernels,
+    enc: &mut wgpu::CommandEncoder,
+    levels: &mut Vec<Resident>,
+    level: usize,
+    data: &wgpu::Buffer,
+    n: usize,
+) -> Result<(), GpuError> {
+    let blocks = n.div_ceil(WG as usize);
+    while levels.len() <= level {
+        levels.push(Resident::new("prefix-sum block totals"));
+    }
+    let sums = levels[level].ensure(dev, lim, blocks as u64 * 4)?.clone();
+    let p = Params {
+        n: n as u32,
+        num_blocks: blocks as u32,
+        ..Params::default()
+    };
+    dispatch(dev, enc, &k.scan_blocks, &p, &[data, &sums], blocks as u32);
+    if blocks > 1 {
+        encode_scan_level(dev, lim, k, enc, levels, level + 1, &sums, blocks)?;
+        dispatch(dev, enc, &k.add_offsets, &p, &[data, &sums], blocks as u32);
+    }
+    Ok(())
+}
+
+/// Encodes the stable LSD radix sort of the `total` entries in slot 0 of the key/value
+/// buffers: 4 passes over the depth bits, then enough passes over the (camera, tile) index for
+/// `tile_keys` values. Returns the slot that holds the result.
+fn encode_sort(
+    dev: &wgpu::Device,
+    lim: &wgpu::Limits,
+    k: &Kernels,
+    enc: &mut wgpu::CommandEncoder,
+    b: &mut Buffers,
+    total: usize,
+    tile_keys: u32,
+) -> Result<usize, GpuError> {
+    let blocks = total.div_ceil(WG as usize);
+    let hist = b
+        .histogram
+        .ensure(dev, lim, blocks as u64 * 256 * 4)?
+        .clone();
+    let tile_bits = 32 - tile_keys.saturating_sub(1).leading_zeros();
+    let mut passes: Vec<(u32, u32)> = (0..4).map(|d| (0, d * 8)).collect();
+    passes.extend((0..tile_bits.div_ceil(8)).map(|d| (1, d * 8)));
+    let mut cur = 0;
+    for (use_hi, shift) in passes {
+        let p = Params {
+            n: total as u32,
+            num_blocks: blocks as u32,
+            shift,
+            use_hi,
+            ..Params::default()
+        };
+        let src_keys = if use_hi == 1 {
+            b.key_hi[cur].get()
+        } else {
+            b.key_lo[cur].get()
+        };
+        dispatch(
+            dev,
+            enc,
+            &k.sort_histogram,
+            &p,
+            &[src_keys, &hist],
+            blocks as u32,
+        );
+        encode_scan(dev, lim, k, enc, &mut b.scan_levels, &hist, blocks * 256)?;
+        let nxt = 1 - cur;
+        dispatch(
+            dev,
+            enc,
+            &k.sort_scatter,
+            &p,
+            &[
+                b.key_lo[cur].get(),
+                b.key_hi[cur].get(),
+                b.vals[cur].get(),
+                b.key_lo[nxt].get(),
+                b.key_hi[nxt].get(),
+                b.vals[nxt].get(),
+                &hist,
+            ],
+            blocks as u32,
+        );
+        cur = nxt;
+    }
+    Ok(cur)
+}
