@@ -17,12 +17,19 @@
 //! pixels) runs in a fixed order, so the same inputs on the same adapter and driver give the
 //! same bits. Different adapters or drivers may differ in the last bits (`exp`, fused
 //! multiply-adds chosen by the shader compiler).
+//!
+//! The training step resident on the GPU (everything but the rasterizer):
+//! * [`BlurLoss`] — blur mean (GeMS Eq. 1), fused (1−λ)·L1 + λ·(1 − SSIM) and dL/d(render_k).
+//! * [`buffers`] — uploads, readbacks and storage buffers shared by the kernels.
 
+pub mod buffers;
 mod context;
 mod kernels;
+mod loss;
 mod renderer;
 
 pub use context::{AdapterSummary, DeviceChoice, GpuContext, select};
+pub use loss::{BlurLoss, LossScalars};
 pub use renderer::GpuRenderer;
 
 /// A batch of `count` RGB images of `width`×`height` on the GPU.
