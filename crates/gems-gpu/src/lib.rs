@@ -20,16 +20,23 @@
 //!
 //! The training step resident on the GPU (everything but the rasterizer):
 //! * [`BlurLoss`] — blur mean (GeMS Eq. 1), fused (1−λ)·L1 + λ·(1 − SSIM) and dL/d(render_k).
+//! * [`GpuGaussians`] — the Gaussian parameters and Adam moments, resident (layout: [`params`]);
+//!   [`GpuGradients`] — per-Gaussian gradients in the same layout.
+//! * [`GpuAdam`] — torch-semantics Adam over the resident groups, per-group learning rates.
 //! * [`buffers`] — uploads, readbacks and storage buffers shared by the kernels.
 
+mod adam;
 pub mod buffers;
 mod context;
 mod kernels;
 mod loss;
+pub mod params;
 mod renderer;
 
+pub use adam::{AdamConfig, AdamGroupStep, GaussianLrs, GpuAdam};
 pub use context::{AdapterSummary, DeviceChoice, GpuContext, select};
 pub use loss::{BlurLoss, LossScalars};
+pub use params::{GpuGaussians, GpuGradients, Group, GroupMoments};
 pub use renderer::GpuRenderer;
 
 /// A batch of `count` RGB images of `width`×`height` on the GPU.

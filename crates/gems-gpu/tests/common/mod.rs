@@ -101,3 +101,40 @@ pub fn load_pair(name: &str) -> Pair {
         ssim_valid,
     }
 }
+
+/// `n` random Gaussians (degree 3) with opacities spread over (sigmoid(−7), sigmoid(4)).
+pub fn gaussians(n: usize, seed: u64) -> gems_splat::Gaussians {
+    let v = values(n * 59, seed, 0.0, 1.0);
+    let mut g = gems_splat::Gaussians::with_degree(3);
+    for r in v.chunks_exact(59) {
+        let sh: [[f32; 3]; 16] =
+            std::array::from_fn(|k| std::array::from_fn(|c| r[11 + 3 * k + c] - 0.5));
+        g.push(
+            [r[0] * 4.0 - 2.0, r[1] * 4.0 - 2.0, r[2] * 4.0 + 1.0],
+            [r[3] + 0.1, r[4] - 0.5, r[5] - 0.5, r[6] - 0.5],
+            [r[7] * 3.0 - 5.0, r[8] * 3.0 - 5.0, r[9] * 3.0 - 5.0],
+            r[10] * 11.0 - 7.0,
+            sh,
+        );
+    }
+    g
+}
+
+/// Largest distance in units in the last place between two f32 slices (same signs assumed for
+/// nonzero values; ±0 count as equal).
+pub fn max_ulps(a: &[f32], b: &[f32]) -> u32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(&x, &y)| {
+            if x == y {
+                0
+            } else if x.is_sign_negative() != y.is_sign_negative() {
+                u32::MAX
+            } else {
+                x.to_bits().abs_diff(y.to_bits())
+            }
+        })
+        .max()
+        .unwrap_or(0)
+}
