@@ -23,6 +23,7 @@
 //! * [`GpuGaussians`] — the Gaussian parameters and Adam moments, resident (layout: [`params`]);
 //!   [`GpuGradients`] — per-Gaussian gradients in the same layout.
 //! * [`GpuAdam`] — torch-semantics Adam over the resident groups, per-group learning rates.
+//! * [`GpuMcmc`] — 3DGS-MCMC: SGLD noise (Philox, [`rng`]), relocation and growth.
 //! * [`buffers`] — uploads, readbacks and storage buffers shared by the kernels.
 
 mod adam;
@@ -30,12 +31,15 @@ pub mod buffers;
 mod context;
 mod kernels;
 mod loss;
+mod mcmc;
 pub mod params;
 mod renderer;
+pub mod rng;
 
 pub use adam::{AdamConfig, AdamGroupStep, GaussianLrs, GpuAdam};
 pub use context::{AdapterSummary, DeviceChoice, GpuContext, select};
 pub use loss::{BlurLoss, LossScalars};
+pub use mcmc::{GpuMcmc, N_MAX, NoiseParams};
 pub use params::{GpuGaussians, GpuGradients, Group, GroupMoments};
 pub use renderer::GpuRenderer;
 

@@ -166,6 +166,16 @@ impl GpuGaussians {
         &self.groups
     }
 
+    /// Sets the live row count (rows between the old and new count must have been written).
+    pub(crate) fn set_len(&mut self, len: usize) {
+        assert!(
+            len <= self.capacity,
+            "len {len} over capacity {}",
+            self.capacity
+        );
+        self.len = len;
+    }
+
     /// Downloads the live Gaussians (waits for the GPU).
     pub fn download(&self, ctx: &GpuContext) -> Result<Gaussians, GpuError> {
         let n = self.len;

@@ -174,6 +174,28 @@ fn copy_row(g: &mut Gaussians, src: usize, dst: usize) {
     g.sh[dst] = g.sh[src];
 }
 
+/// The random part of [`relocate_dead`]: the dead rows (opacity ≤ `min_opacity`) and, for each,
+/// a source drawn from the alive rows ∝ opacity with replacement. Empty when nothing is dead or
+/// nothing is alive. (Exposed so that a GPU-resident trainer draws exactly the CPU's samples.)
+pub fn relocation_draws<R: Rng + ?Sized>(
+    opacity_logits: &[f32],
+    min_opacity: f32,
+    rng: &mut R,
+) -> (Vec<usize>, Vec<usize>) {
+    let n = opacity_logits.len();
+    let opac: Vec<f32> = opacity_logits.iter().map(|&l| sigmoid(l)).collect();
+    let (dead, alive): (Vec<usize>, Vec<usize>) = (0..n).partition(|&i| opac[i] <= min_opacity);
+    if dead.is_empty() || alive.is_empty() {
+        return (Vec::new(), Vec::new());
+    }
+    let alive_w: Vec<f32> = alive.iter().map(|&i| opac[i]).collect();
+    let sources: Vec<usize> = multinomial_with_replacement(&alive_w, dead.len(), rng)
+        .into_iter()
+        .map(|k| alive[k])
+        .collect();
+    (dead, sources)
+}
+
 /// Moves dead Gaussians onto alive ones; returns how many were relocated.
 pub fn relocate_dead<R: Rng + ?Sized>(
     g: &mut Gaussians,
@@ -182,23 +204,34 @@ pub fn relocate_dead<R: Rng + ?Sized>(
     binoms: &BinomialTable,
     rng: &mut R,
 ) -> usize {
-    let n = g.opacity_logits.len();
-    let opac: Vec<f32> = g.opacity_logits.iter().map(|&l| sigmoid(l)).collect();
-    let (dead, alive): (Vec<usize>, Vec<usize>) = (0..n).partition(|&i| opac[i] <= min_opacity);
-    if dead.is_empty() || alive.is_empty() {
+    let (dead, sources) = relocation_draws(&g.opacity_logits, min_opacity, rng);
+    if dead.is_empty() {
         return 0;
     }
-    let alive_w: Vec<f32> = alive.iter().map(|&i| opac[i]).collect();
-    let sources: Vec<usize> = multinomial_with_replacement(&alive_w, dead.len(), rng)
-        .into_iter()
-        .map(|k| alive[k])
-        .collect();
     split_sources(g, &sources, min_opacity, binoms);
     for (&d, &s) in dead.iter().zip(&sources) {
         copy_row(g, s, d);
     }
     adam.reset_rows(&sources);
     dead.len()
+}
+
+/// The random part of [`add_new`]: min(cap_max, ⌊growth·N⌋) − N sources drawn from all rows
+/// ∝ opacity with replacement (empty when there is nothing to add).
+pub fn growth_draws<R: Rng + ?Sized>(
+    opacity_logits: &[f32],
+    cap_max: usize,
+    growth_factor: f64,
+    rng: &mut R,
+) -> Vec<usize> {
+    let n = opacity_logits.len();
+    let target = cap_max.min((growth_factor * n as f64) as usize);
+    let n_add = target.saturating_sub(n);
+    if n_add == 0 {
+        return Vec::new();
+    }
+    let opac: Vec<f32> = opacity_logits.iter().map(|&l| sigmoid(l)).collect();
+    multinomial_with_replacement(&opac, n_add, rng)
 }
 
 /// Grows the population to min(cap_max, ⌊growth·N⌋); returns how many were added.
@@ -211,14 +244,7 @@ pub fn add_new<R: Rng + ?Sized>(
     binoms: &BinomialTable,
     rng: &mut R,
 ) -> usize {
-    let n = g.opacity_logits.len();
-    let target = cap_max.min((growth_factor * n as f64) as usize);
-    let n_add = target.saturating_sub(n);
-    if n_add == 0 {
-        return 0;
-    }
-    let opac: Vec<f32> = g.opacity_logits.iter().map(|&l| sigmoid(l)).collect();
-    let sources = multinomial_with_replacement(&opac, n_add, rng);
+    let sources = growth_draws(&g.opacity_logits, cap_max, growth_factor, rng);
     if sources.is_empty() {
         return 0;
     }
@@ -244,8 +270,21 @@ pub fn add_new<R: Rng + ?Sized>(
 ///
 /// The noise is drawn serially from `rng` so the result does not depend on thread count.
 pub fn inject_noise<R: Rng + ?Sized>(g: &mut Gaussians, scale: f32, min_opacity: f32, rng: &mut R) {
+    apply_noise(g, scale, min_opacity, |_| {
+        std::array::from_fn(|_| StandardNormal.sample(rng))
+    });
+}
+
+/// The deterministic part of [`inject_noise`] with ε given by `eps(i)`, called once per row in
+/// row order (exposed so that the GPU kernel can be tested on the same noise samples).
+pub fn apply_noise(
+    g: &mut Gaussians,
+    scale: f32,
+    min_opacity: f32,
+    mut eps: impl FnMut(usize) -> [f32; 3],
+) {
     for i in 0..g.means.len() {
-        let eps: [f32; 3] = std::array::from_fn(|_| StandardNormal.sample(rng));
+        let eps = eps(i);
         let o = sigmoid(g.opacity_logits[i]);
         let gate = sigmoid(-100.0 * (o - min_opacity)) * scale;
         let r = quat_to_rotation(g.quats[i]);
