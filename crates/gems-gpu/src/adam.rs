@@ -78,7 +78,7 @@ impl GpuAdam {
         let module = buffers::module(
             ctx,
             "adam_update",
-            &[FLAT_INDEX_WGSL, include_str!("shaders/adam_update.wgsl")],
+            &[FLAT_INDEX_WGSL, include_str!("../shaders/adam_update.wgsl")],
         );
         GpuAdam {
             kernel: Kernel::new(ctx, &module, "adam_update"),

@@ -146,7 +146,7 @@ impl BlurLoss {
             ssim_scale: 1.0 / (3 * hi * wi) as f32,
         };
         let consts = constants_wgsl();
-        let common = include_str!("shaders/loss_common.wgsl");
+        let common = include_str!("../shaders/loss_common.wgsl");
         let fwd = buffers::module(
             ctx,
             "loss_forward",
@@ -154,7 +154,7 @@ impl BlurLoss {
                 &consts,
                 FLAT_INDEX_WGSL,
                 common,
-                include_str!("shaders/loss_forward.wgsl"),
+                include_str!("../shaders/loss_forward.wgsl"),
             ],
         );
         let bwd = buffers::module(
@@ -164,7 +164,7 @@ impl BlurLoss {
                 &consts,
                 FLAT_INDEX_WGSL,
                 common,
-                include_str!("shaders/loss_backward.wgsl"),
+                include_str!("../shaders/loss_backward.wgsl"),
             ],
         );
         let sb = |label: &str, n: usize| buffers::storage_buffer(ctx, label, n);

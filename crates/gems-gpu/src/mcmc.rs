@@ -117,14 +117,14 @@ impl GpuMcmc {
             "mcmc_noise",
             &[
                 FLAT_INDEX_WGSL,
-                include_str!("shaders/philox.wgsl"),
-                include_str!("shaders/mcmc_noise.wgsl"),
+                include_str!("../shaders/philox.wgsl"),
+                include_str!("../shaders/mcmc_noise.wgsl"),
             ],
         );
         let reloc = buffers::module(
             ctx,
             "mcmc_relocate",
-            &[FLAT_INDEX_WGSL, include_str!("shaders/mcmc_relocate.wgsl")],
+            &[FLAT_INDEX_WGSL, include_str!("../shaders/mcmc_relocate.wgsl")],
         );
         Ok(GpuMcmc {
             noise_philox: Kernel::new(ctx, &noise, "noise_philox"),
