@@ -18,7 +18,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::buffers::{self, FLAT_INDEX_WGSL, Kernel, WORKGROUP};
-use crate::{GpuContext, GpuError};
+use crate::{GpuContext, GpuError, ImageBatch};
 
 const WIN: usize = 11;
 const RAD: usize = WIN / 2;
@@ -322,6 +322,37 @@ impl BlurLoss {
         self.encode(ctx, &mut enc, renders, target)?;
         ctx.queue.submit([enc.finish()]);
         Ok(())
+    }
+
+    /// [`Self::run`] on the renderer's output ([`crate::GpuRenderer::forward_images`]): checks
+    /// that the batch holds this loss's view count and image size.
+    pub fn run_batch(
+        &self,
+        ctx: &GpuContext,
+        renders: &ImageBatch,
+        target: &wgpu::Buffer,
+    ) -> Result<(), GpuError> {
+        if renders.count != self.views
+            || renders.width as usize != self.width
+            || renders.height as usize != self.height
+        {
+            return Err(GpuError::Shape(format!(
+                "render batch of {} images of {}x{} for a loss over {} views of {}x{}",
+                renders.count, renders.width, renders.height, self.views, self.width, self.height
+            )));
+        }
+        self.run(ctx, &renders.buffer, target)
+    }
+
+    /// dL/d(render_k) as an [`ImageBatch`], the input of
+    /// [`crate::GpuRenderer::backward_images`] (shares [`Self::d_renders`]).
+    pub fn d_renders_batch(&self) -> ImageBatch {
+        ImageBatch {
+            buffer: self.d_renders.clone(),
+            count: self.views,
+            width: self.width as u32,
+            height: self.height as u32,
+        }
     }
 
     /// Reads back the four scalars of the last evaluation (16 bytes; waits for the GPU).

@@ -124,7 +124,10 @@ impl GpuMcmc {
         let reloc = buffers::module(
             ctx,
             "mcmc_relocate",
-            &[FLAT_INDEX_WGSL, include_str!("../shaders/mcmc_relocate.wgsl")],
+            &[
+                FLAT_INDEX_WGSL,
+                include_str!("../shaders/mcmc_relocate.wgsl"),
+            ],
         );
         Ok(GpuMcmc {
             noise_philox: Kernel::new(ctx, &noise, "noise_philox"),
