@@ -239,3 +239,45 @@ fn bad_inputs_are_errors() {
             .is_err()
     );
 }
+
+#[test]
+fn dispatches_beyond_65535_workgroups_cover_every_element() {
+    // 17.1M values > 65535 × 256: the dispatch folds into two dimensions (as the SH group of
+    // ~360k Gaussians or more does) and every element must still be updated exactly once.
+    let ctx = ctx();
+    let len = 65_535 * 256 + 300_001;
+    let mut p_cpu = values(len, 31, -1.0, 1.0);
+    let g = values(len, 32, -0.1, 0.1);
+    let p = buffers::upload(ctx, "p", &p_cpu).unwrap();
+    let gb = buffers::upload(ctx, "g", &g).unwrap();
+    let m = buffers::storage_buffer(ctx, "m", len).unwrap();
+    let v = buffers::storage_buffer(ctx, "v", len).unwrap();
+    let mut st = AdamState::new(len, 1);
+    let h = AdamHyper {
+        beta1: CFG.beta1,
+        beta2: CFG.beta2,
+        eps: CFG.eps,
+    };
+    st.step(&mut p_cpu, &g, 1e-3, 0.0, h);
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    let step = AdamGroupStep {
+        param: &p,
+        grad: &gb,
+        m: &m,
+        v: &v,
+        rows: len,
+        width: 1,
+        lr_lo: 1e-3,
+        lr_hi: 1e-3,
+        split_col: 0,
+        t: 1,
+    };
+    GpuAdam::new(ctx)
+        .encode_group(ctx, &mut enc, &step, CFG)
+        .unwrap();
+    ctx.queue.submit([enc.finish()]);
+    let out: Vec<f32> = buffers::download(ctx, &p, 0, len).unwrap();
+    assert!(max_ulps(&out, &p_cpu) <= 8);
+    // The last element (in the second row of workgroups) moved like the first.
+    assert_ne!(out[len - 1], values(len, 31, -1.0, 1.0)[len - 1]);
+}
