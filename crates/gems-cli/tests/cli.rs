@@ -46,6 +46,7 @@ fn tiny_scene(dir: &Path) -> PathBuf {
         "synth",
         "--preset",
         "tiny",
+        "-o",
         scene.to_str().unwrap(),
     ]));
     scene

@@ -6,6 +6,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+use crate::error::{DataError, Result};
+
 /// Event data found in a scene folder.
 #[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct EventFiles {
@@ -17,6 +19,75 @@ pub struct EventFiles {
     pub bin_counts: Option<PathBuf>,
     /// Folder holding `exposure_start_ts.txt` and `exposure_end_ts.txt`, if present.
     pub exposure_dir: Option<PathBuf>,
+    /// Unit of the stream's time column, as resolved when the scene was opened
+    /// ([`resolve_time_units`]; `None`: the reader's format convention, for HDF5/torch files).
+    #[serde(skip)]
+    pub stream_unit: Option<gems_events::TimeUnit>,
+}
+
+impl EventFiles {
+    /// Reader options for the stream: its resolved unit, the sensor `size` when known.
+    pub fn read_options(&self, size: Option<(u16, u16)>) -> gems_events::ReadOptions {
+        match self.stream_unit {
+            Some(u) => gems_events::ReadOptions::in_unit(size, u),
+            None => gems_events::ReadOptions {
+                size,
+                ..Default::default()
+            },
+        }
+    }
+}
+
+/// The units of a scene's time files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TimeUnits {
+    /// The event stream's (`None`: no stream, or a format read by its own convention).
+    pub stream: Option<gems_events::TimeUnit>,
+    /// The exposure files' (`None`: no exposure files).
+    pub exposure: Option<gems_events::TimeUnit>,
+}
+
+/// The units of the scene's event stream and exposure files, by the one rule of
+/// [`gems_events::detect_units`]: from their values and from each other (exposure windows must
+/// fall inside the stream). `given` (the `--time-unit` option) sets every unit that the file
+/// format does not fix. An ambiguous scene is an error naming both files' ranges.
+pub fn resolve_time_units(
+    files: &EventFiles,
+    given: Option<gems_events::TimeUnit>,
+) -> Result<TimeUnits> {
+    let mut series = Vec::new();
+    let mut stream_at = None;
+    if let Some(p) = &files.stream {
+        if let Some(s) = gems_events::event_time_summary(p).map_err(DataError::Events)? {
+            stream_at = Some(series.len());
+            series.push(s);
+        }
+    }
+    let mut exposure_at = None;
+    if let Some(d) = &files.exposure_dir {
+        exposure_at = Some(series.len());
+        series.push(gems_events::exposure_summary(d).map_err(DataError::Events)?);
+    }
+    if let Some(u) = given {
+        for s in &mut series {
+            s.fixed.get_or_insert(u);
+        }
+    }
+    if series.is_empty() {
+        return Ok(TimeUnits::default());
+    }
+    let units = gems_events::detect_units(&series).map_err(|msg| DataError::Format {
+        path: files
+            .exposure_dir
+            .clone()
+            .or_else(|| files.stream.clone())
+            .unwrap_or_default(),
+        source: crate::error::FormatError(msg),
+    })?;
+    Ok(TimeUnits {
+        stream: stream_at.map(|i| units[i]),
+        exposure: exposure_at.map(|i| units[i]),
+    })
 }
 
 impl EventFiles {
@@ -72,6 +143,7 @@ pub fn find_event_files(root: &Path) -> EventFiles {
         stream,
         bin_counts,
         exposure_dir,
+        stream_unit: None,
     }
 }
 

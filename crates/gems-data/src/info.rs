@@ -20,6 +20,12 @@ pub struct SceneInfo {
     pub root: PathBuf,
     /// Detected layout.
     pub layout: Layout,
+    /// The dataset the folder looks like.
+    pub dataset: String,
+    /// Which file is used for what.
+    pub uses: Vec<crate::scene::FileUse>,
+    /// Where the focal length for the SfM comes from, when the scene has no intrinsics yet.
+    pub focal: Option<crate::exif::FocalSource>,
     /// Number of views.
     pub views: usize,
     /// Training views.
@@ -154,6 +160,13 @@ pub fn scene_info(scene: &Scene, read_events: bool) -> Result<SceneInfo> {
     Ok(SceneInfo {
         root: scene.root.clone(),
         layout: scene.layout,
+        dataset: scene.dataset.clone(),
+        uses: scene.uses.clone(),
+        focal: if intrinsics.is_none() {
+            crate::exif::scene_focal(scene)
+        } else {
+            None
+        },
         views: v.len(),
         train: scene.train_views().count(),
         eval_deblur: scene.deblur_eval_views().count(),
@@ -221,7 +234,7 @@ fn events_summary(scene: &Scene, read_events: bool) -> Result<EventsSummary> {
                 PT_TO_NPY_HINT
             )),
             _ if read_events => {
-                let ev = gems_events::read_events(p, &gems_events::ReadOptions::default())
+                let ev = gems_events::read_events(p, &files.read_options(None))
                     .map_err(DataError::Events)?;
                 s.count = Some(ev.len());
                 s.time_span_us = ev.time_span();
@@ -262,6 +275,10 @@ impl fmt::Display for SceneInfo {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(f, "scene      {}", self.root.display())?;
         writeln!(f, "layout     {}", self.layout.describe())?;
+        writeln!(f, "dataset    {}", self.dataset)?;
+        for u in &self.uses {
+            writeln!(f, "uses       {}: {}", u.path.display(), u.role)?;
+        }
         let hold = self
             .hold
             .map_or("none".to_string(), |h| format!("every {h}th view held out"));
@@ -297,7 +314,17 @@ impl fmt::Display for SceneInfo {
                     " (first view; per-view)"
                 }
             )?,
-            None => writeln!(f, "intrinsics unknown (run `gems sfm` first)")?,
+            None => match &self.focal {
+                Some(fs) => writeln!(
+                    f,
+                    "intrinsics unknown; focal {:.1} px for the SfM from {} (override: --focal)",
+                    fs.focal_px, fs.source
+                )?,
+                None => writeln!(
+                    f,
+                    "intrinsics unknown; focal estimated by the SfM (no EXIF; set one with --focal)"
+                )?,
+            },
         }
         let src = match self.pose_source {
             PoseSource::None => "none (run `gems sfm` first)",

@@ -16,13 +16,19 @@
 //! - [`manifest`]: `gems_scene.json` and the `hold=<n>` marker (for scene generators).
 //! - [`image`]: `load_image`, `save_png`, `downscale_area`, [`ImageCache`].
 //! - [`undistort`]: undistortion maps for SIMPLE_RADIAL / RADIAL / OPENCV cameras.
+//! - [`check`]: full validation of an opened scene (`gems info --check`, and before training).
+//! - [`exif`]: focal length in pixels from photos' EXIF tags.
+//!
+//! Nothing here writes into a scene folder: copies go to a cache folder the caller names.
 //!
 //! Fuzz targets for the binary parsers live in `fuzz/` (its own workspace; see `fuzz/README.md`:
 //! `RUSTC_BOOTSTRAP=1 cargo fuzz run colmap_images_bin`).
 
+pub mod check;
 pub mod colmap;
 pub mod error;
 pub mod events;
+pub mod exif;
 mod fsutil;
 pub mod image;
 pub mod info;
@@ -41,5 +47,6 @@ pub use info::{SceneInfo, scene_info};
 pub use manifest::{Manifest, ManifestPoses, write_hold_marker, write_manifest};
 pub use pose::{Intrinsics, Pose};
 pub use scene::{
-    Layout, OpenOptions, PoseSource, Scene, Split, View, open_scene, open_scene_undistorted,
+    FileUse, Layout, OpenOptions, PoseSource, Scene, Split, View, cache_folder, open_scene,
+    open_scene_undistorted,
 };

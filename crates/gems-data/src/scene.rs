@@ -27,14 +27,22 @@
 //! different world frame than the SfM poses (align before comparing, e.g. Umeyama).
 //!
 //! # Downscaling
-//! With [`OpenOptions::downscale`] `= f > 1` images are read from `images_<f>/` (and
-//! `images_test_<f>/`), which are created with an area filter when missing; existing files are
-//! never overwritten. Intrinsics are rescaled to the actual image size of each view.
+//! With [`OpenOptions::downscale`] `= f > 1` images are read from the scene's `images_<f>/` (and
+//! `images_test_<f>/`) when it exists. Its files may have other names or another extension than
+//! `images/` (Deblur-NeRF real scenes: JPG `images/`, PNG `images_4/`): they are paired by file
+//! stem, else by sorted order when the counts agree; views keep the `images/` name (the key into
+//! SfM models). When the folder is missing, downscaled copies are made with an area filter into
+//! the cache ([`OpenOptions::cache_dir`]), never into the scene; without a cache that is an error.
+//! Intrinsics are rescaled to the actual image size of each view.
+//!
+//! # Nothing is written into the scene
+//! Opening a scene only reads it. Every copy (downscaled, undistorted) goes to
+//! `<cache_dir>/<scene name>-<hash of its path>/`, written atomically.
 //!
 //! # Distortion
 //! SfM cameras with non-zero distortion are an error in [`open_scene`]; [`open_scene_undistorted`]
-//! instead replaces each view's image and sharp ground truth by undistorted copies in
-//! `<folder>_undistorted/` (made when missing, never overwritten; see [`crate::undistort`]).
+//! instead replaces each view's image and sharp ground truth by undistorted copies in the cache
+//! (see [`crate::undistort`]).
 
 use std::path::{Path, PathBuf};
 
@@ -66,6 +74,8 @@ pub enum Layout {
     Llff,
     /// nerfstudio `transforms.json`.
     Nerfstudio,
+    /// A plain folder of photos or video frames (no poses: run SfM).
+    Folder,
 }
 
 impl Layout {
@@ -75,20 +85,22 @@ impl Layout {
             Layout::Gems => "GeMS/BAD-Gaussians/PRISM3D (images/, images_test/, hold=, sparse/0)",
             Layout::Llff => "LLFF/Deblur-NeRF/ExBluRF (poses_bounds.npy, interleaved test views)",
             Layout::Nerfstudio => "nerfstudio (transforms.json)",
+            Layout::Folder => "a folder of photos or video frames (no poses)",
         }
     }
 }
 
 impl std::str::FromStr for Layout {
     type Err = String;
-    /// Parses `gems`, `llff` or `nerfstudio` (as accepted by `gems info --layout`).
+    /// Parses `gems`, `llff`, `nerfstudio` or `folder` (as accepted by `gems info --layout`).
     fn from_str(s: &str) -> std::result::Result<Self, String> {
         match s.to_ascii_lowercase().as_str() {
             "gems" | "bad" | "prism3d" => Ok(Layout::Gems),
             "llff" | "exblurf" | "deblurnerf" => Ok(Layout::Llff),
             "nerfstudio" => Ok(Layout::Nerfstudio),
+            "folder" | "photos" | "frames" => Ok(Layout::Folder),
             other => Err(format!(
-                "unknown layout {other:?} (expected gems, llff or nerfstudio)"
+                "unknown layout {other:?} (expected gems, llff, nerfstudio or folder)"
             )),
         }
     }
@@ -150,14 +162,20 @@ pub struct View {
 /// Options of [`open_scene`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct OpenOptions {
-    /// Image downscale factor (1 = full resolution). `images_<f>/` is created when missing.
+    /// Image downscale factor (1 = full resolution): the scene's `images_<f>/` when it exists,
+    /// else copies made in the cache.
     pub downscale: u32,
     /// Hold-out interval overriding the `hold=` marker (`< 1`: no hold-out).
     pub hold: Option<i64>,
     /// Force a layout instead of detecting it.
     pub layout: Option<Layout>,
-    /// Create missing `images_<f>/` copies (else a missing folder is an error).
-    pub create_downscaled: bool,
+    /// Folder for copies that must be made (downscaled or undistorted images); they go to a
+    /// per-scene subfolder (see [`cache_folder`]). `None`: a needed copy is an error. Never
+    /// inside the scene.
+    pub cache_dir: Option<PathBuf>,
+    /// Unit of the scene's time files (events, exposure windows) when their values leave it
+    /// open (see [`crate::events`]); `None`: detected.
+    pub time_unit: Option<gems_events::TimeUnit>,
 }
 
 impl Default for OpenOptions {
@@ -166,9 +184,19 @@ impl Default for OpenOptions {
             downscale: 1,
             hold: None,
             layout: None,
-            create_downscaled: true,
+            cache_dir: None,
+            time_unit: None,
         }
     }
+}
+
+/// What one file of a scene is used for (reported by `gems info`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FileUse {
+    /// The file or folder.
+    pub path: PathBuf,
+    /// What it is used for.
+    pub role: String,
 }
 
 /// A scene folder, opened.
@@ -194,6 +222,10 @@ pub struct Scene {
     pub manifest: Option<Manifest>,
     /// Event files found.
     pub events: EventFiles,
+    /// The dataset the folder looks like (e.g. "Deblur-NeRF / LLFF", "ExBluRF", "E2NeRF").
+    pub dataset: String,
+    /// Which file is used for what (when several could give the same thing).
+    pub uses: Vec<FileUse>,
 }
 
 impl Scene {
@@ -213,6 +245,14 @@ impl Scene {
     }
 }
 
+/// The LLFF poses file of `root`: `poses_bounds.npy`, or EBAD-NeRF's `pose_bounds.npy`.
+pub fn poses_file(root: &Path) -> Option<PathBuf> {
+    ["poses_bounds.npy", "pose_bounds.npy"]
+        .into_iter()
+        .map(|n| root.join(n))
+        .find(|p| p.is_file())
+}
+
 /// Detects the layout of `root`.
 pub fn detect_layout(root: &Path) -> Result<Layout> {
     if !root.is_dir() {
@@ -226,17 +266,38 @@ pub fn detect_layout(root: &Path) -> Result<Layout> {
         Layout::Gems
     } else if has("transforms.json") {
         Layout::Nerfstudio
-    } else if has("poses_bounds.npy") {
+    } else if poses_file(root).is_some() {
         Layout::Llff
     } else if root.join("images").is_dir() {
         Layout::Gems
+    } else if !list_images(root)?.is_empty() {
+        Layout::Folder
     } else {
         return Err(DataError::Missing {
             path: root.join("images"),
-            what: "image folder (or transforms.json): not a scene folder".into(),
+            what: "image folder (or images, or transforms.json): not a scene folder".into(),
         });
     };
     Ok(layout)
+}
+
+/// The dataset a folder of `layout` looks like, by the files each one ships (for `gems info`).
+fn identify(root: &Path, layout: Layout, events: &EventFiles) -> String {
+    let has = |n: &str| root.join(n).exists();
+    match layout {
+        Layout::Llff if has("images_gt_blur") || has("images_gt_novel") || has("pose_bounds.npy") => {
+            "EBAD-NeRF".into()
+        }
+        Layout::Llff if has("poses_bounds_subframes.npy") => "ExBluRF".into(),
+        Layout::Llff if !events.is_empty() => "E2NeRF (LLFF with events)".into(),
+        Layout::Llff => "Deblur-NeRF / LLFF".into(),
+        Layout::Gems if has(crate::manifest::MANIFEST_FILE) => "GeMS (generated scene)".into(),
+        Layout::Gems if events.bin_counts.is_some() => "PRISM3D-E".into(),
+        Layout::Gems if has("images_test") => "BAD-Gaussians / PRISM3D".into(),
+        Layout::Gems => "GeMS / BAD-Gaussians / PRISM3D (no sharp images)".into(),
+        Layout::Nerfstudio => "nerfstudio".into(),
+        Layout::Folder => "photos or video frames".into(),
+    }
 }
 
 /// Opens the scene in `root` (see the module docs for layouts and rules). SfM cameras with
@@ -246,8 +307,8 @@ pub fn open_scene(root: &Path, opts: &OpenOptions) -> Result<Scene> {
 }
 
 /// Like [`open_scene`], but views whose SfM camera has distortion (SIMPLE_RADIAL, RADIAL,
-/// OPENCV) get undistorted copies of their image and sharp ground truth in
-/// `<folder>_undistorted/` (made when missing, never overwritten) and the pinhole intrinsics of
+/// OPENCV) get undistorted copies of their image and sharp ground truth in the cache
+/// ([`OpenOptions::cache_dir`], required then; made when missing) and the pinhole intrinsics of
 /// those copies.
 pub fn open_scene_undistorted(root: &Path, opts: &OpenOptions) -> Result<Scene> {
     open(root, opts, true)
@@ -264,16 +325,20 @@ fn open(root: &Path, opts: &OpenOptions, undistort: bool) -> Result<Scene> {
         None => read_hold_marker(root)?.unwrap_or(DEFAULT_HOLD),
     };
     let hold = (hold >= 1).then_some(hold);
-    let events = find_event_files(root);
+    let mut events = find_event_files(root);
+    let cache = Cache::new(root, opts);
     let mut scene = match layout {
-        Layout::Gems => open_gems(root, opts, hold, manifest.as_ref(), undistort)?,
-        Layout::Llff => open_llff(root, opts, hold)?,
-        Layout::Nerfstudio => open_nerfstudio(root, opts)?,
+        Layout::Gems => open_gems(root, opts, &cache, hold, manifest.as_ref(), undistort)?,
+        Layout::Llff => open_llff(root, opts, &cache, hold, undistort)?,
+        Layout::Nerfstudio => open_nerfstudio(root, opts, &cache)?,
+        Layout::Folder => open_folder(root, opts, &cache)?,
     };
     scene.manifest = manifest;
-    if let Some(dir) = &events.exposure_dir {
-        let windows = gems_events::read_exposure_windows(dir, gems_events::TimeUnit::Microseconds)
-            .map_err(DataError::Events)?;
+    scene.dataset = identify(root, layout, &events);
+    let units = crate::events::resolve_time_units(&events, opts.time_unit)?;
+    events.stream_unit = units.stream;
+    if let (Some(dir), Some(unit)) = (&events.exposure_dir, units.exposure) {
+        let windows = gems_events::read_exposure_windows(dir, unit).map_err(DataError::Events)?;
         if windows.len() != scene.views.len() {
             return Err(DataError::format(
                 dir.join("exposure_start_ts.txt"),
@@ -287,6 +352,16 @@ fn open(root: &Path, opts: &OpenOptions, undistort: bool) -> Result<Scene> {
         for (v, w) in scene.views.iter_mut().zip(windows) {
             v.exposure = Some(w);
         }
+        scene.uses.push(FileUse {
+            path: dir.join("exposure_start_ts.txt"),
+            role: format!("exposure windows (times in {unit})"),
+        });
+    }
+    if let (Some(p), Some(u)) = (&events.stream, units.stream) {
+        scene.uses.push(FileUse {
+            path: p.clone(),
+            role: format!("event stream (times in {u})"),
+        });
     }
     scene.events = events;
     tracing::debug!(
@@ -298,33 +373,75 @@ fn open(root: &Path, opts: &OpenOptions, undistort: bool) -> Result<Scene> {
     Ok(scene)
 }
 
-/// The image folder for a downscale factor: `base` for 1, else `base_<f>` (created from `base`
-/// when missing and allowed).
-fn image_dir(root: &Path, base: &str, opts: &OpenOptions) -> Result<PathBuf> {
-    let src = root.join(base);
-    if opts.downscale <= 1 {
-        return Ok(src);
+/// Where the copies of one scene go: `<cache_dir>/<scene name>-<hash of its absolute path>/`, so
+/// one cache folder can serve several scenes without mixing them.
+pub fn cache_folder(cache_dir: &Path, root: &Path) -> PathBuf {
+    let abs = std::fs::canonicalize(root).unwrap_or_else(|_| root.to_path_buf());
+    // FNV-1a: a stable hash (std's hasher may change between releases).
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in abs.as_os_str().as_encoded_bytes() {
+        h = (h ^ u64::from(*b)).wrapping_mul(0x0100_0000_01b3);
     }
-    let dst = root.join(format!("{base}_{}", opts.downscale));
-    if !dst.is_dir() && !opts.create_downscaled {
-        return Err(DataError::Missing {
-            path: dst,
-            what: "downscaled image folder".into(),
-        });
+    let name = abs
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".into());
+    cache_dir.join(format!("{name}-{h:016x}"))
+}
+
+/// The cache of one scene (see [`cache_folder`]); `None` when the caller gave no cache folder.
+struct Cache {
+    dir: Option<PathBuf>,
+    root: PathBuf,
+}
+
+impl Cache {
+    fn new(root: &Path, opts: &OpenOptions) -> Cache {
+        Cache {
+            dir: opts.cache_dir.as_deref().map(|c| cache_folder(c, root)),
+            root: root.to_path_buf(),
+        }
     }
-    ensure_downscaled(&src, &dst, opts.downscale)?;
-    Ok(dst)
+
+    /// `<cache>/<rel>`, or an error naming what needed a copy.
+    fn path(&self, rel: &str, what: &str) -> Result<PathBuf> {
+        let dir = self.dir.as_ref().ok_or_else(|| DataError::Missing {
+            path: self.root.join(rel),
+            what: format!(
+                "{what}; gems never writes into a scene folder: give a cache folder \
+                 (`gems train` makes one under its output, or pass --cache-dir) to have the \
+                 copies made there"
+            ),
+        })?;
+        let root_abs = std::fs::canonicalize(&self.root).unwrap_or_else(|_| self.root.clone());
+        let dir_abs = std::path::absolute(dir).unwrap_or_else(|_| dir.clone());
+        if dir_abs.starts_with(&root_abs) || dir.starts_with(&self.root) {
+            return Err(DataError::Unsupported {
+                path: dir.clone(),
+                msg: "the cache folder must not be inside the scene folder".into(),
+            });
+        }
+        Ok(dir.join(rel))
+    }
 }
 
 /// Makes `dst` hold a copy of every image in `src` downscaled by `factor` with an area filter
-/// (`floor(size / factor)`), same file names and formats. Files already in `dst` are kept as they
-/// are (never overwritten). Returns the number of images written.
+/// (`floor(size / factor)`), same file names and formats, written atomically. Files already in
+/// `dst` at the right size are kept. Returns the number of images written. `dst` must not be a
+/// user's folder: [`open_scene`] passes a cache folder.
 pub fn ensure_downscaled(src: &Path, dst: &Path, factor: u32) -> Result<usize> {
     let sources = list_images(src)?;
     std::fs::create_dir_all(dst).map_err(|e| DataError::io(dst, e))?;
     let todo: Vec<&PathBuf> = sources
         .iter()
-        .filter(|p| p.file_name().is_some_and(|n| !dst.join(n).exists()))
+        .filter(|p| {
+            let Some(n) = p.file_name() else { return false };
+            let want = image_dimensions(p).map(|(w, h)| downscaled_size(w, h, factor));
+            match (image_dimensions(&dst.join(n)), want) {
+                (Ok(have), Ok(want)) => have != want,
+                _ => true,
+            }
+        })
         .collect();
     if !todo.is_empty() {
         tracing::info!(
@@ -332,7 +449,7 @@ pub fn ensure_downscaled(src: &Path, dst: &Path, factor: u32) -> Result<usize> {
             dst = %dst.display(),
             count = todo.len(),
             factor,
-            "creating downscaled images"
+            "creating downscaled images in the cache"
         );
     }
     todo.par_iter()
@@ -353,10 +470,67 @@ fn file_name(p: &Path) -> String {
         .unwrap_or_default()
 }
 
-/// Image list of a folder at the requested downscale, checked against the full-res names.
-fn view_images(root: &Path, base: &str, opts: &OpenOptions) -> Result<Vec<PathBuf>> {
+fn stem(p: &Path) -> String {
+    p.file_stem()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// Pairs the files of an existing `images_<f>/` with those of `images/`: by file name, else by
+/// stem (Deblur-NeRF real: `x.JPG` ↔ `x.png`), else by sorted order when the counts agree.
+fn pair_scaled(full: &[PathBuf], scaled: &[PathBuf], dir: &Path) -> Result<Vec<PathBuf>> {
+    let names = |v: &[PathBuf]| v.iter().map(|p| file_name(p)).collect::<Vec<_>>();
+    if names(scaled) == names(full) {
+        return Ok(scaled.to_vec());
+    }
+    let by_stem: std::collections::HashMap<String, &PathBuf> =
+        scaled.iter().map(|p| (stem(p), p)).collect();
+    if by_stem.len() == scaled.len() && scaled.len() == full.len() {
+        if let Some(paired) = full
+            .iter()
+            .map(|p| by_stem.get(&stem(p)).map(|q| (*q).clone()))
+            .collect::<Option<Vec<_>>>()
+        {
+            return Ok(paired);
+        }
+    }
+    if scaled.len() == full.len() {
+        tracing::warn!(
+            dir = %dir.display(),
+            "file names differ from images/: pairing the two folders by sorted order"
+        );
+        return Ok(scaled.to_vec());
+    }
+    Err(DataError::format(
+        dir,
+        format!(
+            "holds {} images but the full-resolution folder holds {}: they cannot be paired (by \
+             name, stem or order); fix or remove this folder (gems never writes into it)",
+            scaled.len(),
+            full.len()
+        ),
+    ))
+}
+
+/// The images of a view folder at the requested downscale, one per full-resolution image in
+/// name order, paired as in [`pair_scaled`]: `(full-resolution names, files to read)`.
+fn view_images(
+    root: &Path,
+    base: &str,
+    opts: &OpenOptions,
+    cache: &Cache,
+) -> Result<(Vec<String>, Vec<PathBuf>)> {
     let full_dir = root.join(base);
+    let f = opts.downscale.max(1);
+    let scaled_dir = root.join(format!("{base}_{f}"));
     if !full_dir.is_dir() {
+        // Some redistributions ship only the downscaled folder.
+        if f > 1 && scaled_dir.is_dir() {
+            let scaled = list_images(&scaled_dir)?;
+            if !scaled.is_empty() {
+                return Ok((scaled.iter().map(|p| file_name(p)).collect(), scaled));
+            }
+        }
         return Err(DataError::Missing {
             path: full_dir,
             what: "image folder".into(),
@@ -369,25 +543,23 @@ fn view_images(root: &Path, base: &str, opts: &OpenOptions) -> Result<Vec<PathBu
             what: "images (.png/.jpg) in the image folder".into(),
         });
     }
-    let dir = image_dir(root, base, opts)?;
-    if dir == full_dir {
-        return Ok(full);
+    let names = full.iter().map(|p| file_name(p)).collect();
+    if f == 1 {
+        return Ok((names, full));
     }
-    let scaled = list_images(&dir)?;
-    let names = |v: &[PathBuf]| v.iter().map(|p| file_name(p)).collect::<Vec<_>>();
-    if names(&scaled) != names(&full) {
-        return Err(DataError::format(
-            &dir,
-            format!(
-                "holds {} images whose names differ from the {} in {}; remove the folder to \
-                 regenerate it",
-                scaled.len(),
-                full.len(),
-                full_dir.display()
-            ),
-        ));
+    if scaled_dir.is_dir() {
+        return Ok((names, pair_scaled(&full, &list_images(&scaled_dir)?, &scaled_dir)?));
     }
-    Ok(scaled)
+    let dst = cache.path(
+        &format!("{base}_{f}"),
+        &format!("{base}_{f}/ (images downscaled by {f})"),
+    )?;
+    ensure_downscaled(&full_dir, &dst, f)?;
+    let scaled = full
+        .iter()
+        .map(|p| dst.join(p.file_name().expect("listed files have names")))
+        .collect();
+    Ok((names, scaled))
 }
 
 /// Reads image sizes (headers only), in parallel.
@@ -427,9 +599,15 @@ fn find_sfm_dir(root: &Path) -> Option<PathBuf> {
 
 /// Attaches SfM poses and intrinsics to views by file name. Cameras with non-zero distortion
 /// are an error unless `undistort`, in which case every view's image (and sharp ground truth)
-/// is replaced by an undistorted copy in a sibling `<folder>_undistorted/` (made when missing,
-/// never overwritten) and gets the pinhole intrinsics of that copy.
-fn attach_sfm(views: &mut [View], model: &SparseModel, dir: &Path, undistort: bool) -> Result<()> {
+/// is replaced by an undistorted copy in the cache (`<folder>_undistorted/`, made when missing)
+/// and gets the pinhole intrinsics of that copy.
+fn attach_sfm(
+    views: &mut [View],
+    model: &SparseModel,
+    dir: &Path,
+    undistort: bool,
+    cache: &Cache,
+) -> Result<()> {
     let cams_file = dir.join(format!(
         "cameras.{}",
         match colmap::detect_format(dir) {
@@ -472,23 +650,30 @@ fn attach_sfm(views: &mut [View], model: &SparseModel, dir: &Path, undistort: bo
         );
     }
     if needs_undistort {
-        undistort_views(views, model, &cams_file)?;
+        undistort_views(views, model, &cams_file, cache)?;
     }
     Ok(())
 }
 
-/// `<parent>/<folder>_undistorted/<file>` for an image path.
-fn undistorted_path(p: &Path) -> PathBuf {
-    let dir = p.parent().unwrap_or(Path::new("."));
-    let folder = dir
-        .file_name()
+/// `<folder>_undistorted/<file>` in the cache for an image path.
+fn undistorted_path(p: &Path, cache: &Cache) -> Result<PathBuf> {
+    let folder = p
+        .parent()
+        .and_then(|d| d.file_name())
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    dir.with_file_name(format!("{folder}_undistorted"))
-        .join(p.file_name().unwrap_or_default())
+    cache.path(
+        &format!("{folder}_undistorted/{}", file_name(p)),
+        "undistorted copies of the images (the SfM camera has distortion)",
+    )
 }
 
-fn undistort_views(views: &mut [View], model: &SparseModel, cams_file: &Path) -> Result<()> {
+fn undistort_views(
+    views: &mut [View],
+    model: &SparseModel,
+    cams_file: &Path,
+    cache: &Cache,
+) -> Result<()> {
     use crate::undistort::UndistortMap;
     use std::collections::HashMap;
     // One map per (camera, image size), shared by every view that uses it.
@@ -513,14 +698,14 @@ fn undistort_views(views: &mut [View], model: &SparseModel, cams_file: &Path) ->
     }
     tracing::info!(
         views = jobs.len(),
-        "undistorting images (missing copies only)"
+        "undistorting images into the cache (missing copies only)"
     );
     let maps = maps;
     let mut work: Vec<(PathBuf, PathBuf, &UndistortMap)> = Vec::new();
     for &(i, key) in &jobs {
         let v = &views[i];
         for p in std::iter::once(&v.image).chain(v.sharp_gt.as_ref()) {
-            work.push((p.clone(), undistorted_path(p), &maps[&key]));
+            work.push((p.clone(), undistorted_path(p, cache)?, &maps[&key]));
         }
     }
     work.par_iter()
@@ -533,8 +718,12 @@ fn undistort_views(views: &mut [View], model: &SparseModel, cams_file: &Path) ->
         .collect::<Result<Vec<()>>>()?;
     for &(i, key) in &jobs {
         let v = &mut views[i];
-        v.image = undistorted_path(&v.image);
-        v.sharp_gt = v.sharp_gt.as_deref().map(undistorted_path);
+        v.image = undistorted_path(&v.image, cache)?;
+        v.sharp_gt = v
+            .sharp_gt
+            .as_deref()
+            .map(|p| undistorted_path(p, cache))
+            .transpose()?;
         v.intrinsics = Some(maps[&key].intrinsics());
     }
     Ok(())
@@ -624,149 +813,259 @@ fn attach_prism3d_gt(views: &mut [View], sfm_dir: &Path) -> Result<()> {
     Ok(())
 }
 
-fn open_gems(
+/// A scene with the given parts and nothing else yet (manifest, events and dataset are filled in
+/// by [`open`]).
+fn new_scene(
     root: &Path,
+    layout: Layout,
     opts: &OpenOptions,
     hold: Option<i64>,
-    manifest: Option<&Manifest>,
-    undistort: bool,
-) -> Result<Scene> {
-    let images = view_images(root, "images", opts)?;
-    let dims = sizes(&images)?;
-    let test_dir = root.join("images_test");
-    let sharp = if test_dir.is_dir() {
-        Some(view_images(root, "images_test", opts)?)
-    } else {
-        None
-    };
-    // Without sharp images there is nothing to evaluate on, so no view is held out.
-    let hold = if sharp.is_some() { hold } else { None };
-    let mut views: Vec<View> = images
-        .iter()
-        .zip(&dims)
+    views: Vec<View>,
+) -> Scene {
+    Scene {
+        root: root.to_path_buf(),
+        layout,
+        downscale: opts.downscale.max(1),
+        hold,
+        views,
+        sfm: None,
+        sfm_dir: None,
+        pose_source: PoseSource::None,
+        manifest: None,
+        events: EventFiles::default(),
+        dataset: String::new(),
+        uses: Vec::new(),
+    }
+}
+
+/// Views of `names`/`images` (full-resolution names, files to read) with their header sizes.
+fn make_views(names: Vec<String>, images: &[PathBuf], hold: Option<i64>) -> Result<Vec<View>> {
+    let dims = sizes(images)?;
+    Ok(names
+        .into_iter()
+        .zip(images)
+        .zip(dims)
         .enumerate()
-        .map(|(i, (p, &d))| new_view(file_name(p), p.clone(), d, split_of(i, hold)))
-        .collect();
-    if let Some(sharp) = sharp {
-        let n_train = views.iter().filter(|v| v.split == Split::Train).count();
-        let targets: Vec<usize> = if sharp.len() == views.len() {
-            (0..views.len()).collect()
-        } else if sharp.len() == n_train {
-            (0..views.len())
-                .filter(|&i| views[i].split == Split::Train)
-                .collect()
-        } else {
+        .map(|(i, ((n, p), d))| new_view(n, p.clone(), d, split_of(i, hold)))
+        .collect())
+}
+
+/// Attaches `sharp` (one per view, or one per training view) as sharp ground truth; `folder`
+/// names the sharp folder in errors.
+fn attach_sharp(
+    views: &mut [View],
+    sharp: Vec<PathBuf>,
+    folder: &Path,
+    hold: Option<i64>,
+    only: Option<Split>,
+) -> Result<()> {
+    let n_train = views.iter().filter(|v| v.split == Split::Train).count();
+    let n_novel = views.len() - n_train;
+    let pick = |s: Split| -> Vec<usize> { (0..views.len()).filter(|&i| views[i].split == s).collect() };
+    let targets: Vec<usize> = match only {
+        Some(s) if sharp.len() == pick(s).len() => pick(s),
+        None if sharp.len() == views.len() => (0..views.len()).collect(),
+        Some(Split::Train) | None if sharp.len() == n_train => pick(Split::Train),
+        _ => {
             return Err(DataError::format(
-                &test_dir,
+                folder,
                 format!(
-                    "{} sharp images, but images/ has {} (one per image) and {n_train} training \
-                     views with hold={} (one per training image); neither matches",
+                    "{} sharp images, but the scene has {} views: {n_train} training and {n_novel} \
+                     held out with hold={}; neither matches",
                     sharp.len(),
                     views.len(),
                     hold.unwrap_or(0)
                 ),
             ));
-        };
-        let sharp_dims = sizes(&sharp)?;
-        for (i, (p, d)) in targets.into_iter().zip(sharp.into_iter().zip(sharp_dims)) {
-            if d != (views[i].width, views[i].height) {
-                return Err(DataError::format(
-                    &p,
-                    format!(
-                        "sharp image is {}x{} but its blurry twin {} is {}x{}",
-                        d.0, d.1, views[i].name, views[i].width, views[i].height
-                    ),
-                ));
-            }
-            views[i].sharp_gt = Some(p);
         }
-    }
-    let mut pose_source = PoseSource::None;
-    let sfm_dir = find_sfm_dir(root);
-    let sfm = match &sfm_dir {
-        Some(dir) => {
-            let m = colmap::read_model(dir)?;
-            attach_sfm(&mut views, &m, dir, undistort)?;
-            pose_source = PoseSource::Sfm;
-            Some(m)
-        }
-        None => None,
     };
-    let pb = root.join("poses_bounds.npy");
+    let sharp_dims = sizes(&sharp)?;
+    for (i, (p, d)) in targets.into_iter().zip(sharp.into_iter().zip(sharp_dims)) {
+        if d != (views[i].width, views[i].height) {
+            return Err(DataError::format(
+                &p,
+                format!(
+                    "sharp image is {}x{} but its blurry twin {} is {}x{}",
+                    d.0, d.1, views[i].name, views[i].width, views[i].height
+                ),
+            ));
+        }
+        views[i].sharp_gt = Some(p);
+    }
+    Ok(())
+}
+
+/// Reads the scene's COLMAP model (if any) into `scene`: poses, intrinsics, points.
+fn attach_scene_sfm(scene: &mut Scene, undistort: bool, cache: &Cache) -> Result<()> {
+    let Some(dir) = find_sfm_dir(&scene.root) else {
+        return Ok(());
+    };
+    let m = colmap::read_model(&dir)?;
+    attach_sfm(&mut scene.views, &m, &dir, undistort, cache)?;
+    scene.pose_source = PoseSource::Sfm;
+    scene.uses.push(FileUse {
+        path: dir.clone(),
+        role: format!(
+            "COLMAP model: starting poses, intrinsics and {} points (--init colmap)",
+            m.points.len()
+        ),
+    });
+    scene.sfm = Some(m);
+    scene.sfm_dir = Some(dir);
+    Ok(())
+}
+
+fn open_gems(
+    root: &Path,
+    opts: &OpenOptions,
+    cache: &Cache,
+    hold: Option<i64>,
+    manifest: Option<&Manifest>,
+    undistort: bool,
+) -> Result<Scene> {
+    let (names, images) = view_images(root, "images", opts, cache)?;
+    let test_dir = root.join("images_test");
+    let sharp = if test_dir.is_dir() {
+        Some(view_images(root, "images_test", opts, cache)?.1)
+    } else {
+        None
+    };
+    // Without sharp images there is nothing to evaluate on, so no view is held out.
+    let hold = if sharp.is_some() { hold } else { None };
+    let views = make_views(names, &images, hold)?;
+    let mut scene = new_scene(root, Layout::Gems, opts, hold, views);
+    if let Some(sharp) = sharp {
+        attach_sharp(&mut scene.views, sharp, &test_dir, hold, None)?;
+    }
+    attach_scene_sfm(&mut scene, undistort, cache)?;
     let ground_truth = manifest.is_some_and(|m| m.poses == ManifestPoses::GroundTruth);
-    if pb.is_file() {
-        let rows = llff_rows_for(&pb, views.len())?;
-        for (v, r) in views.iter_mut().zip(&rows) {
+    if let Some(pb) = poses_file(root) {
+        let rows = llff_rows_for(&pb, scene.views.len())?;
+        let has_sfm = scene.sfm.is_some();
+        for (v, r) in scene.views.iter_mut().zip(&rows) {
             if ground_truth {
                 v.gt_pose = Some(r.pose());
-            } else if sfm.is_none() {
+            } else if !has_sfm {
                 v.pose = Some(r.pose());
             }
             if v.intrinsics.is_none() {
                 v.intrinsics = Some(r.intrinsics().resized(v.width, v.height));
             }
         }
-        if !ground_truth && sfm.is_none() {
-            pose_source = PoseSource::Llff;
+        let role = if ground_truth {
+            "ground-truth mid-exposure poses (declared by gems_scene.json)"
+        } else if has_sfm {
+            "read and checked (count, finite rotations); poses not used: the COLMAP model gives them"
+        } else {
+            "starting poses and intrinsics"
+        };
+        scene.uses.push(FileUse {
+            path: pb,
+            role: role.into(),
+        });
+        if !ground_truth && !has_sfm {
+            scene.pose_source = PoseSource::Llff;
         }
     }
-    if let Some(dir) = &sfm_dir {
-        attach_prism3d_gt(&mut views, dir)?;
+    if let Some(dir) = scene.sfm_dir.clone() {
+        attach_prism3d_gt(&mut scene.views, &dir)?;
     }
     let sub = root.join("poses_bounds_subframes.npy");
     if sub.is_file() {
-        attach_subframes(&mut views, &sub)?;
+        attach_subframes(&mut scene.views, &sub)?;
     }
-    Ok(Scene {
-        root: root.to_path_buf(),
-        layout: Layout::Gems,
-        downscale: opts.downscale.max(1),
-        hold,
-        views,
-        sfm,
-        sfm_dir,
-        pose_source,
-        manifest: None,
-        events: EventFiles::default(),
-    })
+    Ok(scene)
 }
 
-fn open_llff(root: &Path, opts: &OpenOptions, hold: Option<i64>) -> Result<Scene> {
-    let images = view_images(root, "images", opts)?;
-    let dims = sizes(&images)?;
-    let pb = root.join("poses_bounds.npy");
+/// LLFF / Deblur-NeRF / ExBluRF / E2NeRF / EBAD-NeRF. With a COLMAP model beside the poses file
+/// (Deblur-NeRF real scenes as redistributed), the model gives poses, intrinsics and points and
+/// the poses file is read and checked against the images; otherwise the poses file gives them.
+fn open_llff(
+    root: &Path,
+    opts: &OpenOptions,
+    cache: &Cache,
+    hold: Option<i64>,
+    undistort: bool,
+) -> Result<Scene> {
+    let (names, images) = view_images(root, "images", opts, cache)?;
+    let pb = poses_file(root).ok_or_else(|| DataError::Missing {
+        path: root.join("poses_bounds.npy"),
+        what: "LLFF poses file".into(),
+    })?;
     let rows = llff_rows_for(&pb, images.len())?;
-    let mut views: Vec<View> = Vec::with_capacity(images.len());
-    for (i, ((p, d), r)) in images.iter().zip(dims).zip(&rows).enumerate() {
-        let split = split_of(i, hold);
-        let mut v = new_view(file_name(p), p.clone(), d, split);
-        if split == Split::NovelView {
-            // Deblur-NeRF/ExBluRF interleave the sharp test images with the blurry ones.
-            v.sharp_gt = Some(p.clone());
+    let mut views = make_views(names, &images, hold)?;
+    // EBAD-NeRF keeps the sharp images apart; Deblur-NeRF/ExBluRF interleave the sharp test
+    // images with the blurry ones.
+    let gt_blur = root.join("images_gt_blur");
+    let gt_novel = root.join("images_gt_novel");
+    let separate = gt_blur.is_dir() || gt_novel.is_dir();
+    for (v, r) in views.iter_mut().zip(&rows) {
+        if v.split == Split::NovelView && !separate {
+            v.sharp_gt = Some(v.image.clone());
         }
         v.pose = Some(r.pose());
-        v.intrinsics = Some(r.intrinsics().resized(d.0, d.1));
-        views.push(v);
+        v.intrinsics = Some(r.intrinsics().resized(v.width, v.height));
+    }
+    let mut scene = new_scene(root, Layout::Llff, opts, hold, views);
+    for (dir, only) in [(&gt_blur, Split::Train), (&gt_novel, Split::NovelView)] {
+        if dir.is_dir() {
+            let base = file_name(dir);
+            let sharp = view_images(root, &base, opts, cache)?.1;
+            attach_sharp(&mut scene.views, sharp, dir, hold, Some(only))?;
+        }
+    }
+    scene.pose_source = PoseSource::Llff;
+    if find_sfm_dir(root).is_some() {
+        // Poses come from one source only: the model's frame need not be the poses file's.
+        for v in &mut scene.views {
+            v.pose = None;
+        }
+        attach_scene_sfm(&mut scene, undistort, cache)?;
+        scene.uses.push(FileUse {
+            path: pb,
+            role: format!(
+                "read and checked ({} rows for {} images, finite rotations); poses not used: the \
+                 COLMAP model gives them",
+                rows.len(),
+                scene.views.len()
+            ),
+        });
+    } else {
+        scene.uses.push(FileUse {
+            path: pb,
+            role: "starting poses and intrinsics".into(),
+        });
     }
     let sub = root.join("poses_bounds_subframes.npy");
     if sub.is_file() {
-        attach_subframes(&mut views, &sub)?;
+        attach_subframes(&mut scene.views, &sub)?;
+        scene.uses.push(FileUse {
+            path: sub,
+            role: "ground-truth sub-frame poses".into(),
+        });
     }
-    Ok(Scene {
-        root: root.to_path_buf(),
-        layout: Layout::Llff,
-        downscale: opts.downscale.max(1),
-        hold,
-        views,
-        sfm: None,
-        sfm_dir: None,
-        pose_source: PoseSource::Llff,
-        manifest: None,
-        events: EventFiles::default(),
-    })
+    Ok(scene)
 }
 
-fn open_nerfstudio(root: &Path, opts: &OpenOptions) -> Result<Scene> {
+/// A plain folder of photos or video frames: every image a training view, no poses.
+fn open_folder(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Scene> {
+    let full = list_images(root)?;
+    let f = opts.downscale.max(1);
+    let images = if f == 1 {
+        full.clone()
+    } else {
+        let dst = cache.path(&format!("images_{f}"), &format!("photos downscaled by {f}"))?;
+        ensure_downscaled(root, &dst, f)?;
+        full.iter()
+            .map(|p| dst.join(p.file_name().expect("listed files have names")))
+            .collect()
+    };
+    let names = full.iter().map(|p| file_name(p)).collect();
+    let views = make_views(names, &images, None)?;
+    Ok(new_scene(root, Layout::Folder, opts, None, views))
+}
+
+fn open_nerfstudio(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Scene> {
     let tpath = root.join("transforms.json");
     let t = nerfstudio::read_transforms(&tpath)?;
     if t.frames.is_empty() {
@@ -775,6 +1074,9 @@ fn open_nerfstudio(root: &Path, opts: &OpenOptions) -> Result<Scene> {
     let mut frames = t.frames;
     frames.sort_by(|a, b| a.file_path.cmp(&b.file_path));
     let mut views = Vec::with_capacity(frames.len());
+    // Downscaled folder per source folder: nerfstudio's own `images_<f>/` beside it, else a copy
+    // in the cache.
+    let mut scaled_dirs: std::collections::HashMap<PathBuf, PathBuf> = Default::default();
     for f in frames {
         let mut p = root.join(&f.file_path);
         if !p.is_file() && p.extension().is_none() {
@@ -787,28 +1089,48 @@ fn open_nerfstudio(root: &Path, opts: &OpenOptions) -> Result<Scene> {
                 what: format!("image of frame {:?} in {}", f.file_path, tpath.display()),
             });
         }
+        let name = file_name(&p);
         if opts.downscale > 1 {
             let parent = p.parent().unwrap_or(root).to_path_buf();
-            let base = parent
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            let dst = parent.with_file_name(format!("{base}_{}", opts.downscale));
-            if !dst.is_dir() && !opts.create_downscaled {
-                return Err(DataError::Missing {
-                    path: dst,
-                    what: "downscaled image folder".into(),
-                });
-            }
-            ensure_downscaled(&parent, &dst, opts.downscale)?;
-            p = dst.join(p.file_name().expect("checked is_file"));
+            let dst = match scaled_dirs.get(&parent) {
+                Some(d) => d.clone(),
+                None => {
+                    let base = file_name(&parent);
+                    let sibling = parent.with_file_name(format!("{base}_{}", opts.downscale));
+                    let d = if sibling.is_dir() {
+                        sibling
+                    } else {
+                        let rel = parent.strip_prefix(root).unwrap_or(&parent);
+                        let d = cache.path(
+                            &format!("{}_{}", rel.display(), opts.downscale),
+                            &format!("{base}_{} (images downscaled by {})", opts.downscale, opts.downscale),
+                        )?;
+                        ensure_downscaled(&parent, &d, opts.downscale)?;
+                        d
+                    };
+                    scaled_dirs.insert(parent.clone(), d.clone());
+                    d
+                }
+            };
+            let same = dst.join(&name);
+            p = if same.is_file() {
+                same
+            } else {
+                list_images(&dst)?
+                    .into_iter()
+                    .find(|q| stem(q) == stem(&p))
+                    .ok_or_else(|| DataError::Missing {
+                        path: same,
+                        what: format!("downscaled copy of {name}"),
+                    })?
+            };
         }
         let (w, h) = image_dimensions(&p)?;
         let split = match f.split {
             Some(FrameSplit::Eval) => Split::NovelView,
             _ => Split::Train,
         };
-        let mut v = new_view(file_name(&p), p.clone(), (w, h), split);
+        let mut v = new_view(name, p.clone(), (w, h), split);
         if split == Split::NovelView {
             v.sharp_gt = Some(p);
         }
@@ -816,16 +1138,7 @@ fn open_nerfstudio(root: &Path, opts: &OpenOptions) -> Result<Scene> {
         v.intrinsics = Some(f.camera.resolve(w, h));
         views.push(v);
     }
-    Ok(Scene {
-        root: root.to_path_buf(),
-        layout: Layout::Nerfstudio,
-        downscale: opts.downscale.max(1),
-        hold: None,
-        views,
-        sfm: None,
-        sfm_dir: None,
-        pose_source: PoseSource::Nerfstudio,
-        manifest: None,
-        events: EventFiles::default(),
-    })
+    let mut scene = new_scene(root, Layout::Nerfstudio, opts, None, views);
+    scene.pose_source = PoseSource::Nerfstudio;
+    Ok(scene)
 }

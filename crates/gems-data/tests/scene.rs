@@ -191,19 +191,32 @@ fn distorted_cameras_are_undistorted_into_copies() {
         params: vec![30.0, 16.0, 12.0, -0.2],
     };
     colmap::write_model(&root.join("sparse/0"), &m, ModelFormat::Binary).unwrap();
+    // Copies go to the cache, never into the scene; without a cache that is an error.
+    let e = open_scene_undistorted(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cache"), "{e}");
+    let cache_dir = tempfile::tempdir().unwrap();
+    let cache = cache_folder(cache_dir.path(), root);
+    let before = snapshot(root);
     // A pre-existing copy is kept as it is.
-    write_img(&root.join("images_undistorted/001.png"), 16, 12, 77);
-    let kept = std::fs::read(root.join("images_undistorted/001.png")).unwrap();
-    let s = open_scene_undistorted(root, &OpenOptions::default()).unwrap();
+    write_img(&cache.join("images_undistorted/001.png"), 16, 12, 77);
+    let kept = std::fs::read(cache.join("images_undistorted/001.png")).unwrap();
+    let opts = OpenOptions {
+        cache_dir: Some(cache_dir.path().to_path_buf()),
+        ..OpenOptions::default()
+    };
+    let s = open_scene_undistorted(root, &opts).unwrap();
+    assert_eq!(snapshot(root), before, "nothing written into the scene");
     assert_eq!(
-        std::fs::read(root.join("images_undistorted/001.png")).unwrap(),
+        std::fs::read(cache.join("images_undistorted/001.png")).unwrap(),
         kept
     );
     let v = &s.views[2];
-    assert_eq!(v.image, root.join("images_undistorted/002.png"));
+    assert_eq!(v.image, cache.join("images_undistorted/002.png"));
     assert_eq!(
         v.sharp_gt.as_deref(),
-        Some(root.join("images_test_undistorted/002.png").as_path())
+        Some(cache.join("images_test_undistorted/002.png").as_path())
     );
     let k = v.intrinsics.unwrap();
     assert_eq!(
@@ -270,39 +283,64 @@ fn bad_gaussians_style_sharp_per_training_view() {
     );
 }
 
+/// Every file under `root` with its bytes (test scenes are small).
+fn snapshot(root: &Path) -> std::collections::BTreeMap<std::path::PathBuf, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p.clone());
+                out.insert(p, Vec::new());
+            } else {
+                out.insert(p.clone(), std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
 #[test]
-fn downscaled_copies_are_made_and_never_overwritten() {
+fn downscaled_copies_go_to_the_cache_never_into_the_scene() {
     let dir = tempfile::tempdir().unwrap();
-    let root = dir.path();
+    let root = &dir.path().join("scene");
     make_gems(root, 4, 8, 9, 6);
-    // A pre-existing downscaled file with different content must survive.
-    write_img(&root.join("images_2/001.png"), 4, 3, 999);
-    let before = std::fs::read(root.join("images_2/001.png")).unwrap();
+    let before = snapshot(root);
+    // Without a cache a missing images_<f>/ is an error that says where copies would go.
     let opts = OpenOptions {
         downscale: 2,
         ..OpenOptions::default()
     };
+    let e = open_scene(root, &opts).unwrap_err().to_string();
+    assert!(e.contains("images_2") && e.contains("cache"), "{e}");
+    let cache_dir = dir.path().join("cache");
+    let opts = OpenOptions {
+        downscale: 2,
+        cache_dir: Some(cache_dir.clone()),
+        ..OpenOptions::default()
+    };
     let s = open_scene(root, &opts).unwrap();
-    assert_eq!(
-        std::fs::read(root.join("images_2/001.png")).unwrap(),
-        before
-    );
+    assert_eq!(snapshot(root), before, "nothing written into the scene");
+    let cache = cache_folder(&cache_dir, root);
+    assert!(cache.starts_with(&cache_dir));
     assert_eq!(
         (s.views[0].width, s.views[0].height),
         (4, 3),
         "floor(9/2) x 6/2"
     );
-    assert!(s.views[0].image.starts_with(root.join("images_2")));
+    assert!(s.views[0].image.starts_with(cache.join("images_2")));
+    assert_eq!(s.views[0].name, "000.png");
     assert!(
         s.views[2]
             .sharp_gt
             .as_ref()
             .unwrap()
-            .starts_with(root.join("images_test_2"))
+            .starts_with(cache.join("images_test_2"))
     );
     // Area filter: the copy equals the area-filtered full image (8-bit rounding aside).
     let full = load_image(&root.join("images/002.png")).unwrap();
-    let small = load_image(&root.join("images_2/002.png")).unwrap();
+    let small = load_image(&cache.join("images_2/002.png")).unwrap();
     let expect = gems_data::image::downscale_area(&full, 4, 3);
     for (a, b) in small.data.iter().zip(&expect.data) {
         assert!((a - b).abs() <= 0.5 / 255.0 + 1e-6);
@@ -310,14 +348,66 @@ fn downscaled_copies_are_made_and_never_overwritten() {
     // Intrinsics: camera at 18×12 → 4×3 per axis.
     let k = s.views[0].intrinsics.unwrap();
     assert!((k.fx - 40.0 * 4.0 / 18.0).abs() < 1e-12 && (k.fy - 42.0 * 3.0 / 12.0).abs() < 1e-12);
-    // Without permission to create, a missing folder is an error.
-    let opts = OpenOptions {
+    // A second open reuses the cached copies as they are.
+    let t = std::fs::metadata(cache.join("images_2/002.png"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    open_scene(root, &opts).unwrap();
+    assert_eq!(
+        std::fs::metadata(cache.join("images_2/002.png"))
+            .unwrap()
+            .modified()
+            .unwrap(),
+        t
+    );
+    // A cache inside the scene is refused.
+    let inside = OpenOptions {
         downscale: 3,
-        create_downscaled: false,
+        cache_dir: Some(root.join("cache")),
         ..OpenOptions::default()
     };
+    let e = open_scene(root, &inside).unwrap_err().to_string();
+    assert!(e.contains("inside the scene"), "{e}");
+    assert_eq!(snapshot(root), before);
+}
+
+#[test]
+fn an_existing_downscaled_folder_is_paired_by_stem_then_by_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    make_gems(root, 4, 8, 8, 6);
+    std::fs::remove_dir_all(root.join("images_test")).unwrap();
+    // Same stems, another extension (Deblur-NeRF real: JPG images/, PNG images_4/): by stem,
+    // whatever the order of the extensions.
+    for (i, n) in names(4).iter().enumerate() {
+        let stem = n.trim_end_matches(".png");
+        let mut img = ImageRgb::new(4, 3);
+        img.data.fill(i as f32 / 4.0);
+        gems_data::image::save_image_auto(&root.join(format!("images_2/{stem}.jpg")), &img)
+            .unwrap();
+    }
+    let opts = OpenOptions {
+        downscale: 2,
+        ..OpenOptions::default()
+    };
+    let s = open_scene(root, &opts).unwrap();
+    assert_eq!(s.views[1].name, "001.png", "views keep the images/ name (SfM key)");
+    assert_eq!(s.views[1].image, root.join("images_2/001.jpg"));
+    assert!(s.views[1].pose.is_some(), "the SfM model matches by the images/ name");
+    // Names differ completely but the count agrees: sorted order.
+    std::fs::remove_dir_all(root.join("images_2")).unwrap();
+    for (i, n) in ["a.png", "b.png", "c.png", "d.png"].iter().enumerate() {
+        write_img(&root.join("images_2").join(n), 4, 3, i as u32);
+    }
+    let s = open_scene(root, &opts).unwrap();
+    assert_eq!(s.views[2].name, "002.png");
+    assert_eq!(s.views[2].image, root.join("images_2/c.png"));
+    // A partial folder cannot be paired: one error, and the folder is left alone.
+    std::fs::remove_file(root.join("images_2/d.png")).unwrap();
     let e = open_scene(root, &opts).unwrap_err().to_string();
-    assert!(e.contains("images_3"), "{e}");
+    assert!(e.contains("images_2") && e.contains("holds 3 images") && e.contains("4"), "{e}");
+    assert_eq!(std::fs::read_dir(root.join("images_2")).unwrap().count(), 3);
 }
 
 #[test]
@@ -562,7 +652,7 @@ fn events_and_exposure_windows() {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path();
     make_gems(root, 3, 8, 8, 6);
-    let t: Vec<i64> = (0..100).map(|i| i * 10).collect();
+    let t: Vec<i64> = (0..100).map(|i| i * 10_000).collect();
     let ev = gems_events::EventStream::from_columns(
         8,
         6,
@@ -574,14 +664,22 @@ fn events_and_exposure_windows() {
     .unwrap();
     std::fs::create_dir_all(root.join("events")).unwrap();
     gems_events::write_events_npz(&root.join("events/events.npz"), &ev).unwrap();
-    std::fs::write(root.join("events/exposure_start_ts.txt"), "0\n300\n600\n").unwrap();
-    std::fs::write(root.join("events/exposure_end_ts.txt"), "99\n450\n990\n").unwrap();
+    std::fs::write(
+        root.join("events/exposure_start_ts.txt"),
+        "0\n300000\n600000\n",
+    )
+    .unwrap();
+    std::fs::write(
+        root.join("events/exposure_end_ts.txt"),
+        "99000\n450000\n990000\n",
+    )
+    .unwrap();
     let s = open_scene(root, &OpenOptions::default()).unwrap();
-    assert_eq!(s.views[1].exposure.unwrap().start, 300);
+    assert_eq!(s.views[1].exposure.unwrap().start, 300_000);
     let info = scene_info(&s, true).unwrap();
     let e = info.events.as_ref().unwrap();
     assert_eq!(e.count, Some(100));
-    assert_eq!(e.time_span_us, Some((0, 990)));
+    assert_eq!(e.time_span_us, Some((0, 990_000)));
     let counts: Vec<Option<usize>> = e.windows.iter().map(|w| w.events).collect();
     assert_eq!(counts, [Some(10), Some(16), Some(40)]);
     let text = info.to_string();
@@ -593,8 +691,8 @@ fn events_and_exposure_windows() {
     let quick = scene_info(&s, false).unwrap();
     assert_eq!(quick.events.unwrap().count, None);
     // Window count mismatch names the file.
-    std::fs::write(root.join("events/exposure_start_ts.txt"), "0\n300\n").unwrap();
-    std::fs::write(root.join("events/exposure_end_ts.txt"), "99\n450\n").unwrap();
+    std::fs::write(root.join("events/exposure_start_ts.txt"), "0\n300000\n").unwrap();
+    std::fs::write(root.join("events/exposure_end_ts.txt"), "99000\n450000\n").unwrap();
     let e = open_scene(root, &OpenOptions::default())
         .unwrap_err()
         .to_string();
@@ -614,4 +712,87 @@ fn torch_bins_are_reported_with_conversion_hint() {
     let e = info.events.unwrap();
     assert!(e.bin_counts.unwrap().ends_with("events_bins_13.pt"));
     assert!(e.notes[0].contains("numpy.save"), "{:?}", e.notes);
+}
+
+/// Writes float-second events (an `.npz` with float64 `t`, as tub-rip / v2e conversions do) over
+/// 0..1 s, sensor 8×6.
+fn write_float_second_events(path: &Path) {
+    use npyz::WriterBuilder;
+    let n = 200usize;
+    let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.005).collect();
+    let x: Vec<u16> = (0..n).map(|i| (i % 8) as u16).collect();
+    let y: Vec<u16> = (0..n).map(|i| (i % 6) as u16).collect();
+    let p: Vec<i8> = (0..n).map(|i| if i % 2 == 0 { 1 } else { -1 }).collect();
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let f = std::fs::File::create(path).unwrap();
+    let mut npz = npyz::npz::NpzWriter::new(f);
+    macro_rules! put {
+        ($name:expr, $v:expr) => {{
+            let mut w = npz
+                .array($name, Default::default())
+                .unwrap()
+                .default_dtype()
+                .shape(&[$v.len() as u64])
+                .begin_nd()
+                .unwrap();
+            w.extend($v.iter().copied()).unwrap();
+            w.finish().unwrap();
+        }};
+    }
+    put!("t", t);
+    put!("x", x);
+    put!("y", y);
+    put!("p", p);
+}
+
+#[test]
+fn time_units_are_detected_across_a_scenes_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    make_gems(root, 3, 8, 8, 6);
+    write_float_second_events(&root.join("events.npz"));
+    // The scene: exposure files in seconds beside float-second events.
+    std::fs::write(root.join("exposure_start_ts.txt"), "0.1\n0.4\n0.7\n").unwrap();
+    std::fs::write(root.join("exposure_end_ts.txt"), "0.2\n0.5\n0.8\n").unwrap();
+    let s = open_scene(root, &OpenOptions::default()).unwrap();
+    let w = s.views[1].exposure.unwrap();
+    assert_eq!((w.start, w.end), (400_000, 500_000));
+    let info = scene_info(&s, true).unwrap();
+    let counts: Vec<Option<usize>> = info
+        .events
+        .as_ref()
+        .unwrap()
+        .windows
+        .iter()
+        .map(|w| w.events)
+        .collect();
+    assert_eq!(counts, [Some(21), Some(21), Some(21)], "every window holds events");
+    assert!(gems_data::check::check_scene(&s).is_empty());
+    // The same windows in µs are read as µs.
+    std::fs::write(root.join("exposure_start_ts.txt"), "100000\n400000\n700000\n").unwrap();
+    std::fs::write(root.join("exposure_end_ts.txt"), "200000\n500000\n800000\n").unwrap();
+    let s = open_scene(root, &OpenOptions::default()).unwrap();
+    assert_eq!(s.views[1].exposure.unwrap().start, 400_000);
+    // And in ms as ms (only that unit puts them inside the stream).
+    std::fs::write(root.join("exposure_start_ts.txt"), "100\n400\n700\n").unwrap();
+    std::fs::write(root.join("exposure_end_ts.txt"), "200\n500\n800\n").unwrap();
+    let s = open_scene(root, &OpenOptions::default()).unwrap();
+    assert_eq!(s.views[1].exposure.unwrap().start, 400_000);
+    // Exposures alone whose values fit two units: one error naming the range and the option.
+    std::fs::remove_file(root.join("events.npz")).unwrap();
+    std::fs::write(root.join("exposure_start_ts.txt"), "0\n10\n20\n").unwrap();
+    std::fs::write(root.join("exposure_end_ts.txt"), "5\n15\n25\n").unwrap();
+    let e = open_scene(root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("ambiguous") && e.contains("0 .. 25") && e.contains("--time-unit"),
+        "{e}"
+    );
+    let opts = OpenOptions {
+        time_unit: Some(gems_events::TimeUnit::Milliseconds),
+        ..OpenOptions::default()
+    };
+    let s = open_scene(root, &opts).unwrap();
+    assert_eq!(s.views[1].exposure.unwrap().end, 15_000);
 }

@@ -417,19 +417,20 @@ pub fn report_input(
 
 /// Opens the scene a result was trained on at the training resolution: the downscale factor is
 /// inferred from the first training view found in the scene (full-resolution width / trained
-/// width). `hold` overrides the scene's hold-out marker as at training time.
+/// width). `hold` overrides the scene's hold-out marker as at training time. Downscaled copies the
+/// scene lacks are made in `cache_dir` (never in the scene).
 pub fn open_scene_for(
     output: &TrainOutput,
     root: &Path,
     hold: Option<i64>,
+    cache_dir: Option<&Path>,
 ) -> Result<Scene, EvalError> {
     let full = open_scene(
         root,
         &OpenOptions {
             downscale: 1,
             hold,
-            layout: None,
-            create_downscaled: false,
+            ..OpenOptions::default()
         },
     )?;
     let factor = output
@@ -457,8 +458,8 @@ pub fn open_scene_for(
         &OpenOptions {
             downscale: factor,
             hold,
-            layout: None,
-            create_downscaled: true,
+            cache_dir: cache_dir.map(Path::to_path_buf),
+            ..OpenOptions::default()
         },
     )?)
 }

@@ -32,17 +32,20 @@ fn srgb_to_linear(v: f32) -> f32 {
     }
 }
 
-/// Lists `(t µs, path)` of the frames in `dir`, sorted by time.
-pub fn list_frames(dir: &Path) -> Result<Vec<(i64, PathBuf)>, EventError> {
+/// Lists `(t µs, path)` of the frames in `dir`, sorted by time. The unit of a timestamps file is
+/// `unit` when given, else detected from its values ([`crate::detect_units`]; the file's
+/// convention — `timestamps.txt`/`images.txt` s, `images.csv` ns — breaks ties).
+pub fn list_frames(dir: &Path, unit: Option<TimeUnit>) -> Result<Vec<(i64, PathBuf)>, EventError> {
     let mut frames = Vec::new();
     let listed = [
         ("timestamps.txt", TimeUnit::Seconds),
         ("images.txt", TimeUnit::Seconds),
         ("images.csv", TimeUnit::Nanoseconds),
     ];
-    if let Some((name, unit)) = listed.iter().find(|(n, _)| dir.join(n).is_file()) {
+    if let Some((name, convention)) = listed.iter().find(|(n, _)| dir.join(n).is_file()) {
         let path = dir.join(name);
         let text = std::fs::read_to_string(&path).map_err(|e| EventError::io(&path, e))?;
+        let mut raw: Vec<(f64, PathBuf)> = Vec::new();
         for (i, line) in text.lines().enumerate() {
             let line = line.trim();
             if line.is_empty() || line.starts_with('#') || line.starts_with('%') {
@@ -60,10 +63,27 @@ pub fn list_frames(dir: &Path) -> Result<Vec<(i64, PathBuf)>, EventError> {
             let t: f64 = ts.parse().map_err(|_| {
                 EventError::format(&path, format!("line {}: bad time '{ts}'", i + 1))
             })?;
+            raw.push((t, dir.join(file)));
+        }
+        let unit = match unit {
+            Some(u) => u,
+            None => {
+                let mut values: Vec<f64> = raw.iter().map(|r| r.0).collect();
+                values.sort_by(f64::total_cmp);
+                let summary = crate::TimeSummary::of_values(
+                    path.display().to_string(),
+                    crate::SeriesKind::Frames,
+                    &values,
+                    *convention,
+                );
+                crate::detect_units(&[summary]).map_err(|m| EventError::format(&path, m))?[0]
+            }
+        };
+        for (t, file) in raw {
             let us = unit
                 .floats_to_us(&[t])
-                .map_err(|m| EventError::format(&path, format!("line {}: {m}", i + 1)))?[0];
-            frames.push((us, dir.join(file)));
+                .map_err(|m| EventError::format(&path, m))?[0];
+            frames.push((us, file));
         }
     } else {
         let entries = std::fs::read_dir(dir).map_err(|e| EventError::io(dir, e))?;
@@ -125,12 +145,14 @@ pub fn read_luminance(
 }
 
 /// Simulates events over every frame of `dir` (layouts in the module docs).
+/// `unit` is the unit of a timestamps file (`None`: detected, see [`list_frames`]).
 pub fn simulate_folder(
     dir: &Path,
     config: &SimConfig,
     encoding: FrameEncoding,
+    unit: Option<TimeUnit>,
 ) -> Result<EventStream, EventError> {
-    let frames = list_frames(dir)?;
+    let frames = list_frames(dir, unit)?;
     let mut sim: Option<Simulator> = None;
     let mut size = (0, 0);
     for (t, path) in &frames {

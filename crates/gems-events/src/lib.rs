@@ -15,6 +15,8 @@
 //!   shows a one-line h5py → npz conversion.
 //! - [`write_events_npz`] / [`write_events_text`] write atomically (temp file + rename).
 //! - [`read_exposure_windows`] reads `exposure_start_ts.txt`/`exposure_end_ts.txt`.
+//! - [`detect_units`] tells the time unit (s, ms, µs, ns) of event, exposure and frame-timestamp
+//!   files from their values and from each other ([`event_time_summary`], [`exposure_summary`]).
 //! - [`read_bin_counts`] / [`write_bin_counts`] handle count tensors as `.npy`.
 //!
 //! # Simulation
@@ -31,19 +33,21 @@ mod read;
 mod sim;
 mod stream;
 mod text;
+mod units;
 
 use std::path::PathBuf;
 
 #[cfg(feature = "hdf5")]
 pub use self::hdf5::read_events_hdf5;
 pub use aedat::{AedatFrame, AedatRecording, read_aedat4};
-pub use exposure::{ExposureWindow, read_exposure_windows};
+pub use exposure::{ExposureWindow, exposure_summary, read_exposure_windows};
 pub use folder::{FrameEncoding, list_frames, read_luminance, simulate_folder};
 pub use npy::{read_bin_counts, read_events_npy, write_bin_counts, write_events_npz};
 pub use read::{ReadOptions, TimeUnit, read_events};
 pub use sim::{SimConfig, Simulator, luminance};
 pub use stream::{BinCounts, EventSlice, EventStream};
 pub use text::{read_events_text, write_events_text};
+pub use units::{SeriesKind, TimeSummary, detect_units, event_time_summary};
 
 /// Everything that can go wrong reading, writing or simulating events. File errors name the file.
 #[derive(Debug, thiserror::Error)]

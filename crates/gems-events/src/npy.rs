@@ -284,6 +284,46 @@ pub fn read_events_npy(path: &Path, opts: &ReadOptions) -> Result<EventStream, E
     )
 }
 
+/// The raw time column of an `.npz` (`t`) or `.npy` (N×4, column 0 or 2) event file, unconverted,
+/// and whether it has an integer dtype.
+pub(crate) fn read_raw_times(path: &Path) -> Result<(Vec<f64>, bool), EventError> {
+    let is_npz = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("npz"));
+    let col = if is_npz {
+        let f = std::fs::File::open(path).map_err(|e| EventError::io(path, e))?;
+        let mut npz = NpzArchive::new(std::io::BufReader::new(f))
+            .map_err(|e| EventError::format(path, format!("not a valid .npz archive: {e}")))?;
+        let mut entry = npz
+            .zip_archive()
+            .by_name("t.npy")
+            .map_err(|e| EventError::format(path, format!("array 't': {e}")))?;
+        let mut bytes = Vec::new();
+        entry
+            .read_to_end(&mut bytes)
+            .map_err(|e| EventError::format(path, format!("array 't': {e}")))?;
+        read_column_bytes(&bytes, path, "t")?.1
+    } else {
+        let (shape, col) = read_column(open_npy(path)?, path, "events")?;
+        if shape.len() != 2 || shape[1] != 4 {
+            return Err(EventError::format(
+                path,
+                format!("expected an N×4 event array (t, x, y, p), got shape {shape:?}"),
+            ));
+        }
+        let all = col.as_f64();
+        let c0: Vec<f64> = all.chunks_exact(4).map(|r| r[0]).collect();
+        let t = if c0.windows(2).all(|w| w[0] <= w[1]) {
+            c0
+        } else {
+            all.chunks_exact(4).map(|r| r[2]).collect()
+        };
+        return Ok((t, matches!(col, Column::Int(_))));
+    };
+    let int = matches!(col, Column::Int(_));
+    Ok((col.as_f64(), int))
+}
+
 /// Reads the `t`, `x`, `y`, `p` arrays of an npz archive from any seekable reader.
 pub(crate) fn read_npz_from<R: Read + Seek>(
     reader: R,

@@ -19,6 +19,16 @@ pub enum TimeUnit {
 }
 
 impl TimeUnit {
+    /// The unit's symbol: `s`, `ms`, `us`, `ns`.
+    pub fn symbol(self) -> &'static str {
+        match self {
+            TimeUnit::Seconds => "s",
+            TimeUnit::Milliseconds => "ms",
+            TimeUnit::Microseconds => "us",
+            TimeUnit::Nanoseconds => "ns",
+        }
+    }
+
     /// `(mul, div)` such that µs = value·mul/div.
     pub(crate) fn us_ratio(self) -> (i64, i64) {
         match self {
@@ -39,6 +49,26 @@ impl TimeUnit {
     }
 }
 
+impl std::fmt::Display for TimeUnit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.symbol())
+    }
+}
+
+impl std::str::FromStr for TimeUnit {
+    type Err = String;
+    /// Parses `s`, `ms`, `us` (or `µs`) and `ns`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "s" => Ok(TimeUnit::Seconds),
+            "ms" => Ok(TimeUnit::Milliseconds),
+            "us" | "µs" => Ok(TimeUnit::Microseconds),
+            "ns" => Ok(TimeUnit::Nanoseconds),
+            other => Err(format!("unknown time unit {other:?} (expected s, ms, us or ns)")),
+        }
+    }
+}
+
 /// How to interpret files whose format leaves things open.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ReadOptions {
@@ -51,6 +81,18 @@ pub struct ReadOptions {
     pub int_time_unit: TimeUnit,
     /// Unit of floating-point time arrays in npy/npz (seconds, as in tub-rip's `events.npy`).
     pub float_time_unit: TimeUnit,
+}
+
+impl ReadOptions {
+    /// Options reading every time column of any format in `unit`.
+    pub fn in_unit(size: Option<(u16, u16)>, unit: TimeUnit) -> ReadOptions {
+        ReadOptions {
+            size,
+            text_time_unit: unit,
+            int_time_unit: unit,
+            float_time_unit: unit,
+        }
+    }
 }
 
 impl Default for ReadOptions {

@@ -78,6 +78,34 @@ pub(crate) fn parse_text(
         .map_err(|e| EventError::format(path, e.to_string()))
 }
 
+/// The raw first column (time) of a text event file, unconverted.
+pub(crate) fn read_raw_times(path: &Path) -> Result<Vec<f64>, EventError> {
+    let text = std::fs::read(path).map_err(|e| EventError::io(path, e))?;
+    let mut out = Vec::new();
+    for (i, line) in text.split(|&b| b == b'\n').enumerate() {
+        let Some(f) = line
+            .split(|&b| b == b' ' || b == b'\t' || b == b',' || b == b'\r')
+            .find(|f| !f.is_empty())
+        else {
+            continue;
+        };
+        if f[0] == b'#' {
+            continue;
+        }
+        let v = std::str::from_utf8(f)
+            .ok()
+            .and_then(|s| s.parse::<f64>().ok())
+            .ok_or_else(|| {
+                EventError::format(
+                    path,
+                    format!("line {}: bad timestamp '{}'", i + 1, String::from_utf8_lossy(f)),
+                )
+            })?;
+        out.push(v);
+    }
+    Ok(out)
+}
+
 /// Splits `data` into ranges of about `target` bytes that end at line boundaries.
 fn split_chunks(data: &[u8], target: usize) -> Vec<(usize, usize)> {
     let mut out = Vec::new();

@@ -42,7 +42,7 @@ fn all_layouts_match_direct_simulation() {
     let want = direct(a.path(), &names, &times, &cfg);
     assert!(want.len() > 100);
     assert_eq!(
-        simulate_folder(a.path(), &cfg, FrameEncoding::Srgb).unwrap(),
+        simulate_folder(a.path(), &cfg, FrameEncoding::Srgb, None).unwrap(),
         want
     );
 
@@ -56,7 +56,7 @@ fn all_layouts_match_direct_simulation() {
     )
     .unwrap();
     assert_eq!(
-        simulate_folder(b.path(), &cfg, FrameEncoding::Srgb).unwrap(),
+        simulate_folder(b.path(), &cfg, FrameEncoding::Srgb, None).unwrap(),
         want
     );
 
@@ -69,13 +69,35 @@ fn all_layouts_match_direct_simulation() {
     )
     .unwrap();
     assert_eq!(
-        simulate_folder(c.path(), &cfg, FrameEncoding::Srgb).unwrap(),
+        simulate_folder(c.path(), &cfg, FrameEncoding::Srgb, None).unwrap(),
+        want
+    );
+
+    // timestamps.txt in µs: 1.5 ms or 1.5 s steps, and neither is its convention (s): ambiguous,
+    // until the unit is given.
+    std::fs::write(
+        b.path().join("timestamps.txt"),
+        "0 frame_0.png\n1500 frame_1.png\n3000 frame_2.png\n4500 frame_3.png\n",
+    )
+    .unwrap();
+    let e = simulate_folder(b.path(), &cfg, FrameEncoding::Srgb, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("ambiguous") && e.contains("--time-unit"), "{e}");
+    assert_eq!(
+        simulate_folder(
+            b.path(),
+            &cfg,
+            FrameEncoding::Srgb,
+            Some(gems_events::TimeUnit::Microseconds)
+        )
+        .unwrap(),
         want
     );
 
     // linear decoding differs from sRGB decoding
     assert_ne!(
-        simulate_folder(a.path(), &cfg, FrameEncoding::Linear).unwrap(),
+        simulate_folder(a.path(), &cfg, FrameEncoding::Linear, None).unwrap(),
         want
     );
 }
@@ -83,12 +105,12 @@ fn all_layouts_match_direct_simulation() {
 #[test]
 fn bad_folders_are_clear_errors() {
     let d = tempfile::tempdir().unwrap();
-    let e = simulate_folder(d.path(), &SimConfig::default(), FrameEncoding::Srgb)
+    let e = simulate_folder(d.path(), &SimConfig::default(), FrameEncoding::Srgb, None)
         .unwrap_err()
         .to_string();
     assert!(e.contains("at least 2"), "{e}");
     std::fs::write(d.path().join("timestamps.txt"), "0.0 a.png\nzero b.png\n").unwrap();
-    let e = list_frames(d.path()).unwrap_err().to_string();
+    let e = list_frames(d.path(), None).unwrap_err().to_string();
     assert!(e.contains("timestamps.txt") && e.contains("line 2"), "{e}");
     std::fs::write(
         d.path().join("timestamps.txt"),
@@ -96,7 +118,7 @@ fn bad_folders_are_clear_errors() {
     )
     .unwrap();
     write_frames(d.path(), &["a.png".to_string()]);
-    let e = simulate_folder(d.path(), &SimConfig::default(), FrameEncoding::Srgb)
+    let e = simulate_folder(d.path(), &SimConfig::default(), FrameEncoding::Srgb, None)
         .unwrap_err()
         .to_string();
     assert!(e.contains("missing.png"), "{e}");

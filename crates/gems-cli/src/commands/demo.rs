@@ -102,6 +102,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 &out.join("train"),
                 threshold,
                 gems_init::edi::Linearisation::SrgbEncodedAverage,
+                None,
             )?
         } else {
             tracing::info!("2/3 structure from motion on the blurry images");
@@ -136,7 +137,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         output: &out.join("train"),
         mode,
         cfg,
-        downscale: 1,
+        open: gems_data::OpenOptions::default(),
         resume: false,
         evaluate: true,
         lpips: &[],

@@ -82,10 +82,18 @@ pub struct Args {
     /// included), e.g. `gems synth`'s sub-frame count; default: a continuous exposure.
     #[arg(long)]
     pub exposure_samples: Option<usize>,
+    /// Unit of the scene's event and exposure times (s, ms, us, ns) when their values leave it
+    /// open; detected otherwise.
+    #[arg(long)]
+    pub time_unit: Option<gems_events::TimeUnit>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let scene = gems_data::open_scene(&args.scene, &gems_data::OpenOptions::default())
+    let opts = gems_data::OpenOptions {
+        time_unit: args.time_unit,
+        ..Default::default()
+    };
+    let scene = gems_data::open_scene(&args.scene, &opts)
         .with_context(|| format!("opening scene {}", args.scene.display()))?;
     let linearisation = args.linearisation.resolve(args.gamma);
     let cfg = EdiConfig {

@@ -23,6 +23,9 @@ pub struct Args {
     /// Hold-out interval overriding the scene's `hold=<n>` marker (as used for training).
     #[arg(long)]
     pub hold: Option<i64>,
+    /// Folder for downscaled copies the scene lacks (default: `<output>/cache`, as in training).
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
     /// Adam steps of the test-time pose refinement of each held-out view.
     #[arg(long, default_value_t = 100)]
     pub refine_steps: usize,
@@ -41,7 +44,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.output.display()
         )
     })?;
-    let scene = gems_eval::open_scene_for(&output, &args.scene, args.hold)?;
+    let cache = args
+        .cache_dir
+        .clone()
+        .unwrap_or_else(|| args.output.join("cache"));
+    let scene = gems_eval::open_scene_for(&output, &args.scene, args.hold, Some(&cache))?;
     let mut data = gems_eval::eval_data_from_scene(&output, &scene)?;
     super::pipeline::attach_edi(&mut data, &output, &args.output)?;
     let lpips = if args.lpips.is_empty() {

@@ -47,6 +47,9 @@ pub struct SimulateArgs {
     /// Seed of the threshold mismatch.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Unit of the timestamps file (s, ms, us, ns); detected from its values when omitted.
+    #[arg(long)]
+    pub time_unit: Option<gems_events::TimeUnit>,
 }
 
 /// Arguments of `gems events convert`.
@@ -60,6 +63,9 @@ pub struct ConvertArgs {
     /// Sensor size WIDTHxHEIGHT when the input does not store it.
     #[arg(long, value_parser = parse_size)]
     pub size: Option<(u16, u16)>,
+    /// Unit of the input's timestamps (s, ms, us, ns); detected from its values when omitted.
+    #[arg(long)]
+    pub time_unit: Option<gems_events::TimeUnit>,
 }
 
 fn parse_size(s: &str) -> Result<(u16, u16), String> {
@@ -98,15 +104,27 @@ pub fn run(cmd: EventsCommand) -> anyhow::Result<()> {
             } else {
                 FrameEncoding::Srgb
             };
-            let events = gems_events::simulate_folder(&a.frames, &config, encoding)
+            let events = gems_events::simulate_folder(&a.frames, &config, encoding, a.time_unit)
                 .with_context(|| format!("simulating events from {}", a.frames.display()))?;
             write(&a.output, &events)?;
             tracing::info!(events = events.len(), output = %a.output.display(), "wrote simulated events");
         }
         EventsCommand::Convert(a) => {
-            let opts = ReadOptions {
-                size: a.size,
-                ..ReadOptions::default()
+            let unit = match a.time_unit {
+                Some(u) => Some(u),
+                None => gems_events::event_time_summary(&a.input)?
+                    .map(|s| gems_events::detect_units(&[s]))
+                    .transpose()
+                    .map_err(anyhow::Error::msg)
+                    .with_context(|| a.input.display().to_string())?
+                    .map(|u| u[0]),
+            };
+            let opts = match unit {
+                Some(u) => ReadOptions::in_unit(a.size, u),
+                None => ReadOptions {
+                    size: a.size,
+                    ..ReadOptions::default()
+                },
             };
             let events = gems_events::read_events(&a.input, &opts)?;
             write(&a.output, &events)?;

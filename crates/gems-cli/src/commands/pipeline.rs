@@ -16,7 +16,8 @@ pub struct TrainJob<'a> {
     pub output: &'a Path,
     pub mode: InitMode,
     pub cfg: TrainConfig,
-    pub downscale: u32,
+    /// How to open the scene (downscale, cache folder for copies, time unit).
+    pub open: gems_data::OpenOptions,
     pub resume: bool,
     pub evaluate: bool,
     pub lpips: &'a [PathBuf],
@@ -25,11 +26,7 @@ pub struct TrainJob<'a> {
 /// Trains, writes `point_cloud.ply` (input frame), the model, and — unless disabled — metrics,
 /// trajectories and `report.html`. Returns the report path when one was written.
 pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
-    let opts = gems_data::OpenOptions {
-        downscale: job.downscale,
-        ..Default::default()
-    };
-    let scene = gems_data::open_scene(job.scene, &opts)
+    let scene = gems_data::open_scene(job.scene, &job.open)
         .with_context(|| format!("opening scene {}", job.scene.display()))?;
     std::fs::create_dir_all(job.output)
         .with_context(|| format!("creating {}", job.output.display()))?;
@@ -111,7 +108,12 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
     if !job.evaluate {
         return Ok(None);
     }
-    let scene = gems_eval::trainer_eval::open_scene_for(&output, job.scene, None)?;
+    let scene = gems_eval::trainer_eval::open_scene_for(
+        &output,
+        job.scene,
+        job.open.hold,
+        job.open.cache_dir.as_deref(),
+    )?;
     let mut data = gems_eval::eval_data_from_scene(&output, &scene)?;
     attach_edi(&mut data, &output, job.output)?;
     let lpips = if job.lpips.is_empty() {

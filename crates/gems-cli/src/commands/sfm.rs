@@ -11,8 +11,9 @@ pub struct Args {
     pub scene: PathBuf,
     /// Output folder: `sparse/0` (COLMAP binary), `sfm_report.json`, `sfm_topview.png`.
     #[arg(short, long)]
-    pub out: PathBuf,
-    /// Focal length in pixels when known (held fixed); estimated otherwise.
+    pub output: PathBuf,
+    /// Focal length in pixels when known (held fixed). Default: from the photos' EXIF when they
+    /// carry it, else estimated.
     #[arg(long)]
     pub focal: Option<f64>,
     /// Long side (px) of the pyramid levels to try (default: 192,128,96,64), nearest first to
@@ -35,6 +36,17 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let focal = args.focal.or_else(|| {
+        gems_data::exif::folder_focal(&args.scene).map(|f| {
+            println!(
+                "focal {:.1} px from {} ({})",
+                f.focal_px,
+                f.source,
+                f.image.display()
+            );
+            f.focal_px
+        })
+    });
     if args.colmap_cli {
         let img_dir = if args.scene.join("images").is_dir() {
             args.scene.join("images")
@@ -43,12 +55,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         let opts = ColmapCliOptions {
             binary: args.colmap_binary.clone(),
-            focal_px: args.focal,
+            focal_px: focal,
             use_gpu: false,
         };
-        let (model, dir) = sfm::run_colmap_cli(&img_dir, &args.out.join("colmap_work"), &opts)?;
+        let (model, dir) = sfm::run_colmap_cli(&img_dir, &args.output.join("colmap_work"), &opts)?;
         gems_data::colmap::write_model(
-            &args.out.join("sparse/0"),
+            &args.output.join("sparse/0"),
             &model,
             gems_data::colmap::ModelFormat::Binary,
         )
@@ -58,13 +70,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             model.images.len(),
             model.points.len(),
             dir.display(),
-            args.out.join("sparse/0").display()
+            args.output.join("sparse/0").display()
         );
         return Ok(());
     }
     let images = sfm::load_images(&args.scene)?;
     let mut opts = SfmOptions {
-        focal_px: args.focal,
+        focal_px: focal,
         seed: args.seed,
         ..SfmOptions::default()
     };
@@ -76,7 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     tracing::info!(images = images.len(), "running structure from motion");
     let result = sfm::run_sfm(&images, &opts)?;
-    sfm::write_outputs(&result, &args.out)?;
+    sfm::write_outputs(&result, &args.output)?;
     let s = &result.stats;
     println!(
         "registered {}/{} views, {} points, mean track length {:.2}, reprojection error {:.2} px, focal {:.1} px, estimated blur {:.0} px (working size {}), {:.1} s",
@@ -93,6 +105,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !s.unregistered.is_empty() {
         println!("unregistered: {}", s.unregistered.join(", "));
     }
-    println!("written to {}", args.out.display());
+    println!("written to {}", args.output.display());
     Ok(())
 }

@@ -20,7 +20,8 @@ enum PresetArg {
 #[derive(clap::Args)]
 pub struct Args {
     /// Output scene folder (must not exist or be empty, unless --force).
-    out: PathBuf,
+    #[arg(short, long)]
+    output: PathBuf,
     /// Starting point for every setting below.
     #[arg(long, value_enum, default_value = "small")]
     preset: PresetArg,
@@ -105,14 +106,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ev.threshold_sigma = args.threshold_sigma.unwrap_or(ev.threshold_sigma);
         ev.refractory_us = args.refractory_us.unwrap_or(ev.refractory_us);
     }
-    if args.force && args.out.exists() {
-        std::fs::remove_dir_all(&args.out)
-            .with_context(|| format!("removing {}", args.out.display()))?;
+    if args.force && args.output.exists() {
+        std::fs::remove_dir_all(&args.output)
+            .with_context(|| format!("removing {}", args.output.display()))?;
     }
     let mut progress = |done: usize, total: usize| tracing::info!("rendered view {done}/{total}");
     let start = std::time::Instant::now();
     if args.blur_levels {
-        let summaries = gems_synth::generate_blur_levels(&cfg, &args.out, &mut progress)?;
+        let summaries = gems_synth::generate_blur_levels(&cfg, &args.output, &mut progress)?;
         for s in &summaries {
             let mean = s.blur_px.iter().sum::<f64>() / s.blur_px.len().max(1) as f64;
             println!(
@@ -123,7 +124,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     } else {
-        let s = gems_synth::generate_with_progress(&cfg, &args.out, &mut progress)?;
+        let s = gems_synth::generate_with_progress(&cfg, &args.output, &mut progress)?;
         let mean = s.blur_px.iter().sum::<f64>() / s.blur_px.len().max(1) as f64;
         println!(
             "{}: {} views {}×{}, {} sub-frames, blur {mean:.1} px (requested {}), {} events",

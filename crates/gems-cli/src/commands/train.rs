@@ -57,9 +57,18 @@ pub struct Args {
     /// Override the seed.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Image downscale factor (PRISM3D: 2).
+    /// Image downscale factor (GeMS/PRISM3D on ExBluRF: 2; Deblur-NeRF real: 4). The scene's own
+    /// `images_<f>/` is used when it exists; otherwise copies are made in the cache.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
+    /// Folder for downscaled or undistorted copies the scene lacks (default: `<output>/cache`).
+    /// Nothing is ever written into the scene folder.
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
+    /// Unit of the scene's event and exposure times (s, ms, us, ns) when their values leave it
+    /// open; detected otherwise.
+    #[arg(long)]
+    pub time_unit: Option<gems_events::TimeUnit>,
     /// Continue from the checkpoint in the output folder.
     #[arg(long)]
     pub resume: bool,
@@ -68,8 +77,8 @@ pub struct Args {
     /// SfM on them, or COLMAP with --init colmap-cli.
     #[arg(long)]
     pub events: bool,
-    /// Focal length in pixels at full image size, for --init sfm when the camera is calibrated
-    /// (EXIF, a calibration file); estimated by the SfM otherwise.
+    /// Focal length in pixels at full image size, for --init sfm / colmap-cli when the camera is
+    /// calibrated. Default: from the photos' EXIF when they carry it, else estimated by the SfM.
     #[arg(long)]
     pub focal: Option<f64>,
     /// The COLMAP executable for --init colmap-cli.
@@ -107,6 +116,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("invalid configuration: {e}"))?;
+    let open = gems_data::OpenOptions {
+        downscale: args.downscale,
+        cache_dir: Some(
+            args.cache_dir
+                .clone()
+                .unwrap_or_else(|| args.output.join("cache")),
+        ),
+        time_unit: args.time_unit,
+        ..Default::default()
+    };
+    // Validate the whole scene (every image decoded, poses, events) before any long work.
+    let scene = gems_data::open_scene(&args.scene, &open)
+        .with_context(|| format!("opening scene {}", args.scene.display()))?;
+    let problems = gems_data::check::check_scene(&scene);
+    if !problems.is_empty() {
+        let lines: Vec<String> = problems.iter().map(ToString::to_string).collect();
+        anyhow::bail!(
+            "the scene has {} problem(s) (see `gems info --check`):\n{}",
+            problems.len(),
+            lines.join("\n")
+        );
+    }
+    let focal = args.focal.or_else(|| {
+        gems_data::exif::scene_focal(&scene).map(|f| {
+            tracing::info!(focal_px = f.focal_px, source = %f.source, image = %f.image.display(), "focal for the SfM");
+            f.focal_px
+        })
+    });
     let init = match (args.events, args.init) {
         (true, Init::Colmap | Init::Gt | Init::GtNoisy) => anyhow::bail!(
             "--events deblurs the images for an initialiser that reads them: use it with --init sfm \
@@ -122,6 +159,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 &args.output,
                 args.event_threshold,
                 args.event_linearisation.resolve(args.event_gamma),
+                args.time_unit,
             )
         } else {
             Ok(args.scene.clone())
@@ -144,13 +182,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &init_images()?,
             &args.output.join("sfm"),
             cfg.seed,
-            args.focal,
+            focal,
         )?)),
         Init::ColmapCli => InitMode::Colmap(Some(run_colmap(
             &init_images()?,
             &args.output.join("colmap"),
             &args.colmap_binary,
-            args.focal,
+            focal,
         )?)),
     };
     let report = train_and_report(TrainJob {
@@ -158,7 +196,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         output: &args.output,
         mode,
         cfg,
-        downscale: args.downscale,
+        open,
         resume: args.resume,
         evaluate: !args.no_eval,
         lpips: &args.lpips,
@@ -188,13 +226,18 @@ pub fn edi_images(
     output: &Path,
     threshold: f32,
     linearisation: gems_init::edi::Linearisation,
+    time_unit: Option<gems_events::TimeUnit>,
 ) -> anyhow::Result<PathBuf> {
     let dir = output.join("edi");
     if dir.join("images").is_dir() {
         tracing::info!(dir = %dir.display(), "reusing EDI images");
         return Ok(dir);
     }
-    let s = gems_data::open_scene(scene, &gems_data::OpenOptions::default())
+    let opts = gems_data::OpenOptions {
+        time_unit,
+        ..Default::default()
+    };
+    let s = gems_data::open_scene(scene, &opts)
         .with_context(|| format!("opening scene {}", scene.display()))?;
     if s.events.stream.is_none() && s.events.bin_counts.is_none() {
         anyhow::bail!(

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use gems_data::{ImageRgb, Scene};
-use gems_events::{EventStream, ReadOptions};
+use gems_events::EventStream;
 
 use super::{
     EdiConfig, EdiError, EdiMode, Image, PixelEvents, Reference, Thresholds, edi_binned, edi_exact,
@@ -81,10 +81,9 @@ pub fn deblur_scene(scene: &Scene, cfg: &EdiConfig) -> Result<EdiScene, EdiError
         let is_aedat = stream_path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("aedat4"));
-        let opts = ReadOptions {
-            size: if is_aedat { None } else { Some((w, h)) },
-            ..ReadOptions::default()
-        };
+        let opts = scene
+            .events
+            .read_options(if is_aedat { None } else { Some((w, h)) });
         let events = gems_events::read_events(stream_path, &opts)?;
         if (events.width(), events.height()) != (w, h) {
             return Err(EdiError::Invalid(format!(

@@ -1,0 +1,356 @@
+//! The public deblurring datasets as distributed, rebuilt in miniature: layout and dataset
+//! detection, `images_<f>/` beside `images/`, both pose sources, `gems info --check`'s validation,
+//! and the EXIF focal. Every scene is opened without a cache and must come out unchanged.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use gems_data::colmap::{self, Camera, CameraModel, Image, ModelFormat, SparseModel};
+use gems_data::llff::{self, LlffRow};
+use gems_data::*;
+
+fn write_img(path: &Path, w: u32, h: u32, seed: u32) {
+    let mut img = ImageRgb::new(w, h);
+    for (i, v) in img.data.iter_mut().enumerate() {
+        *v = ((i as u32 * 37 + seed * 11) % 256) as f32 / 255.0;
+    }
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    gems_data::image::save_image_auto(path, &img).unwrap();
+}
+
+fn pose(i: usize) -> Pose {
+    let a = 0.1 * i as f64;
+    Pose::from_quaternion(
+        [(a / 2.0).cos(), 0.0, (a / 2.0).sin(), 0.0],
+        [i as f64 * 0.1, 0.0, 1.0],
+    )
+}
+
+fn snapshot(root: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p.clone());
+                out.insert(p, Vec::new());
+            } else {
+                out.insert(p.clone(), std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+fn rows(n: usize, w: u32, h: u32) -> Vec<LlffRow> {
+    (0..n)
+        .map(|i| LlffRow::from_pose(&pose(i), h as f64, w as f64, 30.0, 0.1, 10.0))
+        .collect()
+}
+
+/// A Deblur-NeRF real scene as redistributed: JPG `images/` at full resolution, PNG `images_4/`
+/// with the same stems, `poses_bounds.npy` (hwf at full resolution), `sparse/0` and `hold=7`.
+fn make_deblur_nerf_real(root: &Path, n: usize) {
+    let (w, h) = (32, 24);
+    for i in 0..n {
+        write_img(&root.join(format!("images/{i:03}.jpg")), w, h, i as u32);
+        write_img(&root.join(format!("images_4/{i:03}.png")), w / 4, h / 4, i as u32);
+    }
+    llff::write_poses_bounds(&root.join("poses_bounds.npy"), &rows(n, w, h)).unwrap();
+    let model = SparseModel {
+        cameras: vec![Camera {
+            id: 1,
+            model: CameraModel::Pinhole,
+            width: w as u64,
+            height: h as u64,
+            params: vec![30.0, 30.0, 16.0, 12.0],
+        }],
+        images: (0..n)
+            .map(|i| Image::from_pose(i as u32 + 1, 1, &format!("{i:03}.jpg"), &pose(i + 1)))
+            .collect(),
+        points: vec![],
+    };
+    colmap::write_model(&root.join("sparse/0"), &model, ModelFormat::Binary).unwrap();
+    write_hold_marker(root, 7).unwrap();
+}
+
+#[test]
+fn deblur_nerf_real_opens_at_its_evaluation_resolution_read_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    make_deblur_nerf_real(root, 9);
+    let before = snapshot(root);
+    let opts = OpenOptions {
+        downscale: 4,
+        ..OpenOptions::default()
+    };
+    let s = open_scene(root, &opts).unwrap();
+    assert_eq!(snapshot(root), before, "opening wrote into the scene");
+    assert_eq!(s.layout, Layout::Llff);
+    assert_eq!(s.dataset, "Deblur-NeRF / LLFF");
+    assert_eq!(s.hold, Some(7));
+    assert_eq!(s.views.len(), 9);
+    let v = &s.views[1];
+    assert_eq!(v.name, "001.jpg");
+    assert_eq!(v.image, root.join("images_4/001.png"));
+    assert_eq!((v.width, v.height), (8, 6));
+    // The COLMAP model gives poses and intrinsics (rescaled to the ×4 images) …
+    assert_eq!(s.pose_source, PoseSource::Sfm);
+    assert_eq!(s.sfm_dir.as_deref(), Some(root.join("sparse/0").as_path()));
+    let k = v.intrinsics.unwrap();
+    assert!((k.fx - 7.5).abs() < 1e-12 && (k.cx - 4.0).abs() < 1e-12, "{k:?}");
+    let p = v.pose.unwrap();
+    assert!((p.translation[0] - pose(2).translation[0]).abs() < 1e-12);
+    // … and the poses file is read, checked and said to be unused for poses.
+    let uses: Vec<String> = s
+        .uses
+        .iter()
+        .map(|u| format!("{}: {}", u.path.display(), u.role))
+        .collect();
+    assert!(
+        uses.iter().any(|u| u.contains("sparse/0") && u.contains("--init colmap")),
+        "{uses:?}"
+    );
+    assert!(
+        uses.iter()
+            .any(|u| u.contains("poses_bounds.npy") && u.contains("9 rows for 9 images")),
+        "{uses:?}"
+    );
+    // Deblur-NeRF interleaves the sharp test views: every 7th view.
+    assert_eq!(s.views[7].split, Split::NovelView);
+    assert_eq!(s.nvs_eval_views().count(), 2);
+    let text = scene_info(&s, false).unwrap().to_string();
+    assert!(
+        text.contains("dataset    Deblur-NeRF / LLFF") && !text.contains("sfm        none"),
+        "{text}"
+    );
+    assert!(gems_data::check::check_scene(&s).is_empty());
+    assert_eq!(snapshot(root), before);
+
+    // The count is checked against the poses file.
+    llff::write_poses_bounds(&root.join("poses_bounds.npy"), &rows(8, 32, 24)).unwrap();
+    let e = open_scene(root, &opts).unwrap_err().to_string();
+    assert!(e.contains("poses_bounds.npy") && e.contains("8 poses"), "{e}");
+}
+
+#[test]
+fn every_dataset_is_recognised() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (8u32, 6u32);
+
+    // ExBluRF: LLFF with ground-truth sub-frame poses.
+    let ex = dir.path().join("exblurf");
+    for i in 0..6 {
+        write_img(&ex.join(format!("images/{i:03}.png")), w, h, i);
+    }
+    llff::write_poses_bounds(&ex.join("poses_bounds.npy"), &rows(6, w, h)).unwrap();
+    let sub: Vec<Vec<LlffRow>> = (0..6).map(|_| rows(3, w, h)).collect();
+    llff::write_subframes(&ex.join("poses_bounds_subframes.npy"), &sub).unwrap();
+    let s = open_scene(&ex, &OpenOptions::default()).unwrap();
+    assert_eq!((s.layout, s.dataset.as_str()), (Layout::Llff, "ExBluRF"));
+    assert_eq!(s.views[1].gt_subframe_poses.as_ref().unwrap().len(), 3);
+
+    // EBAD-NeRF: pose_bounds.npy (sic), sharp images kept apart.
+    let eb = dir.path().join("ebad");
+    for i in 0..6u32 {
+        write_img(&eb.join(format!("images/{i:03}.png")), w, h, i);
+    }
+    llff::write_poses_bounds(&eb.join("pose_bounds.npy"), &rows(6, w, h)).unwrap();
+    write_hold_marker(&eb, 3).unwrap();
+    for i in [1u32, 2, 4, 5] {
+        write_img(&eb.join(format!("images_gt_blur/{i:03}.png")), w, h, 50 + i);
+    }
+    for i in [0u32, 3] {
+        write_img(&eb.join(format!("images_gt_novel/{i:03}.png")), w, h, 90 + i);
+    }
+    let s = open_scene(&eb, &OpenOptions::default()).unwrap();
+    assert_eq!((s.layout, s.dataset.as_str()), (Layout::Llff, "EBAD-NeRF"));
+    assert_eq!(s.deblur_eval_views().count(), 4);
+    assert_eq!(s.nvs_eval_views().count(), 2);
+    assert_eq!(
+        s.views[3].sharp_gt.as_deref(),
+        Some(eb.join("images_gt_novel/003.png").as_path())
+    );
+
+    // E2NeRF real: 5 poses per image, events.
+    let e2 = dir.path().join("e2nerf");
+    for i in 0..4u32 {
+        write_img(&e2.join(format!("images/{:03}.jpg", 5 * i)), w, h, i);
+    }
+    llff::write_poses_bounds(&e2.join("poses_bounds.npy"), &rows(20, w, h)).unwrap();
+    std::fs::write(e2.join("events.pt"), b"PK").unwrap();
+    let s = open_scene(&e2, &OpenOptions::default()).unwrap();
+    assert_eq!(s.dataset, "E2NeRF (LLFF with events)");
+    let mid = pose(7).translation[0]; // image 1: rows 5..10, middle row 7
+    assert!((s.views[1].pose.unwrap().translation[0] - mid).abs() < 1e-12);
+
+    // BAD-Gaussians / PRISM3D: images_test/.
+    let bad = dir.path().join("bad");
+    for i in 0..4u32 {
+        write_img(&bad.join(format!("images/{i:03}.png")), w, h, i);
+        write_img(&bad.join(format!("images_test/{i:03}.png")), w, h, 9 + i);
+    }
+    let s = open_scene(&bad, &OpenOptions::default()).unwrap();
+    assert_eq!((s.layout, s.dataset.as_str()), (Layout::Gems, "BAD-Gaussians / PRISM3D"));
+
+    // A folder of phone photos or video frames.
+    let photos = dir.path().join("frames");
+    for i in 0..5u32 {
+        write_img(&photos.join(format!("{:04}.png", i + 1)), w, h, i);
+    }
+    let before = snapshot(&photos);
+    let s = open_scene(&photos, &OpenOptions::default()).unwrap();
+    assert_eq!((s.layout, s.dataset.as_str()), (Layout::Folder, "photos or video frames"));
+    assert_eq!(s.train_views().count(), 5);
+    assert!(s.views.iter().all(|v| v.pose.is_none()));
+    let cache = dir.path().join("cache");
+    let opts = OpenOptions {
+        downscale: 2,
+        cache_dir: Some(cache.clone()),
+        ..OpenOptions::default()
+    };
+    let s = open_scene(&photos, &opts).unwrap();
+    assert_eq!((s.views[0].width, s.views[0].height), (4, 3));
+    assert!(s.views[0].image.starts_with(&cache));
+    assert_eq!(snapshot(&photos), before);
+}
+
+#[test]
+fn check_finds_every_problem_one_line_each() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    make_deblur_nerf_real(root, 4);
+    // A truncated JPEG: its header still reads (open succeeds), its pixels do not.
+    let jpg = root.join("images/002.jpg");
+    let bytes = std::fs::read(&jpg).unwrap();
+    std::fs::write(&jpg, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    // Events every 10 ms for 1 s, one outside the 32×24 sensor, and a window without events.
+    let n = 100;
+    let ev = gems_events::EventStream::from_columns(
+        40,
+        24,
+        (0..n).map(|i| i * 10_000).collect(),
+        (0..n).map(|i| if i == 50 { 39 } else { (i % 32) as u16 }).collect(),
+        (0..n).map(|i| (i % 24) as u16).collect(),
+        (0..n).map(|i| if i % 2 == 0 { 1 } else { -1 }).collect(),
+    )
+    .unwrap();
+    gems_events::write_events_npz(&root.join("events.npz"), &ev).unwrap();
+    std::fs::write(
+        root.join("exposure_start_ts.txt"),
+        "0\n100000\n200000\n905000\n",
+    )
+    .unwrap();
+    std::fs::write(
+        root.join("exposure_end_ts.txt"),
+        "50000\n150000\n250000\n909000\n",
+    )
+    .unwrap();
+    let s = open_scene(root, &OpenOptions::default()).unwrap();
+    let problems: Vec<String> = gems_data::check::check_scene(&s)
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    assert_eq!(problems.len(), 3, "{problems:#?}");
+    assert!(problems[0].contains("002.jpg") && problems[0].contains("truncated"), "{problems:#?}");
+    assert!(problems[1].contains("events.npz") && problems[1].contains("x = 39"));
+    assert!(problems[2].contains("003.jpg") && problems[2].contains("holds no events"));
+}
+
+/// A JPEG whose APP1 segment carries the EXIF `fields` (built with kamadak-exif's writer).
+fn jpeg_with_exif(path: &Path, w: u32, h: u32, fields: &[::exif::Field]) {
+    let mut writer = ::exif::experimental::Writer::new();
+    for f in fields {
+        writer.push_field(f);
+    }
+    let mut tiff = std::io::Cursor::new(Vec::new());
+    writer.write(&mut tiff, false).unwrap();
+    let tiff = tiff.into_inner();
+    write_img(path, w, h, 3);
+    let jpeg = std::fs::read(path).unwrap();
+    assert_eq!(&jpeg[..2], &[0xFF, 0xD8]);
+    let len = u16::try_from(2 + 6 + tiff.len()).unwrap();
+    let mut out = jpeg[..2].to_vec();
+    out.extend_from_slice(&[0xFF, 0xE1]);
+    out.extend_from_slice(&len.to_be_bytes());
+    out.extend_from_slice(b"Exif\0\0");
+    out.extend_from_slice(&tiff);
+    out.extend_from_slice(&jpeg[2..]);
+    std::fs::write(path, out).unwrap();
+}
+
+fn field(tag: ::exif::Tag, value: ::exif::Value) -> ::exif::Field {
+    ::exif::Field {
+        tag,
+        ifd_num: ::exif::In::PRIMARY,
+        value,
+    }
+}
+
+fn rational(num: u32, denom: u32) -> ::exif::Value {
+    ::exif::Value::Rational(vec![::exif::Rational { num, denom }])
+}
+
+#[test]
+fn exif_focal_in_pixels() {
+    use ::exif::{Tag, Value};
+    let dir = tempfile::tempdir().unwrap();
+    // FocalLength 4.2 mm on a sensor sampled at 15 px/mm, image written at half the original
+    // 128 px width: 4.2 · 15 / 2 = 31.5 px.
+    let a = dir.path().join("photos/a.jpg");
+    jpeg_with_exif(
+        &a,
+        64,
+        48,
+        &[
+            field(Tag::FocalLength, rational(42, 10)),
+            field(Tag::FocalPlaneXResolution, rational(15, 1)),
+            field(Tag::FocalPlaneResolutionUnit, Value::Short(vec![4])),
+            field(Tag::PixelXDimension, Value::Long(vec![128])),
+            // Ignored when the physical tags are there.
+            field(Tag::FocalLengthIn35mmFilm, Value::Short(vec![28])),
+        ],
+    );
+    let f = gems_data::exif::focal_from_exif(&a, 64, 48).unwrap();
+    assert!((f.focal_px - 31.5).abs() < 1e-9, "{f:?}");
+    assert!(f.source.contains("FocalPlaneXResolution"), "{f:?}");
+    // Resolution per inch (the default unit): 4.2 mm · 254 px/inch / 25.4 = 42 px.
+    jpeg_with_exif(
+        &a,
+        64,
+        48,
+        &[
+            field(Tag::FocalLength, rational(42, 10)),
+            field(Tag::FocalPlaneXResolution, rational(254, 1)),
+        ],
+    );
+    let f = gems_data::exif::focal_from_exif(&a, 64, 48).unwrap();
+    assert!((f.focal_px - 42.0).abs() < 1e-9, "{f:?}");
+    // A phone: only the 35 mm equivalent. 27 mm on a 36 mm frame, long side 64 px → 48 px.
+    jpeg_with_exif(
+        &a,
+        64,
+        48,
+        &[
+            field(Tag::FocalLength, rational(42, 10)),
+            field(Tag::FocalLengthIn35mmFilm, Value::Short(vec![27])),
+        ],
+    );
+    let f = gems_data::exif::focal_from_exif(&a, 64, 48).unwrap();
+    assert!((f.focal_px - 48.0).abs() < 1e-9, "{f:?}");
+    assert!(f.source.contains("35mm"), "{f:?}");
+    // The folder's focal is the first photo's; photos without EXIF give none.
+    let g = gems_data::exif::folder_focal(&dir.path().join("photos")).unwrap();
+    assert_eq!(g.image, a);
+    let plain = dir.path().join("plain/b.png");
+    write_img(&plain, 8, 6, 1);
+    assert!(gems_data::exif::folder_focal(plain.parent().unwrap()).is_none());
+    // `gems info` says where the focal came from.
+    let s = open_scene(&dir.path().join("photos"), &OpenOptions::default()).unwrap();
+    let text = scene_info(&s, false).unwrap().to_string();
+    assert!(
+        text.contains("focal 48.0 px for the SfM from EXIF FocalLengthIn35mmFilm 27 mm"),
+        "{text}"
+    );
+}
