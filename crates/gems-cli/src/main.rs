@@ -99,7 +99,10 @@ mod tests {
     fn each_cause_is_printed_once() {
         let io = std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "unexpected end of file");
         let e = anyhow::Error::new(Embeds { source: io }).context("cannot open scene s");
-        assert_eq!(format!("{e:#}").matches("unexpected end of file").count(), 2);
+        assert_eq!(
+            format!("{e:#}").matches("unexpected end of file").count(),
+            2
+        );
         assert_eq!(
             error_chain(&e),
             "cannot open scene s: a.png: unexpected end of file"

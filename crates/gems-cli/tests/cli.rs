@@ -190,3 +190,375 @@ fn bad_input_gives_one_clear_error() {
         "{err}"
     );
 }
+
+/// Every file and folder under `root` with its content hash (FNV-1a), to prove a command left a
+/// scene exactly as it was.
+fn snapshot(root: &Path) -> std::collections::BTreeMap<PathBuf, u64> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p.clone());
+                out.insert(p, 0);
+            } else {
+                let h = std::fs::read(&p)
+                    .unwrap()
+                    .iter()
+                    .fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+                        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+                    });
+                out.insert(p, h);
+            }
+        }
+    }
+    out
+}
+
+/// Makes every file and folder under `root` read-only (a no-op for root, which is why the
+/// snapshot comparison is the real proof).
+fn read_only(root: &Path) {
+    use std::os::unix::fs::PermissionsExt;
+    for (p, _) in snapshot(root) {
+        let mode = if p.is_dir() { 0o555 } else { 0o444 };
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(mode)).unwrap();
+    }
+    std::fs::set_permissions(root, std::fs::Permissions::from_mode(0o555)).unwrap();
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn stdout(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// A Deblur-NeRF real scene as redistributed, made from a generated one at 4× the training size:
+/// JPG `images/`, PNG `images_4/` with the same stems, `poses_bounds.npy`, `sparse/0` (naming the
+/// JPGs) and `hold=7`.
+fn deblur_nerf_real(dir: &Path) -> PathBuf {
+    let synth = dir.join("synth");
+    ok(&gems(&[
+        "synth",
+        "--preset",
+        "tiny",
+        "--width",
+        "192",
+        "--height",
+        "128",
+        "--no-events",
+        "-o",
+        s(&synth),
+    ]));
+    let real = dir.join("blurball");
+    for e in std::fs::read_dir(synth.join("images")).unwrap() {
+        let p = e.unwrap().path();
+        let stem = p.file_stem().unwrap().to_str().unwrap().to_string();
+        let img = gems_data::load_image(&p).unwrap();
+        gems_data::image::save_image_auto(&real.join(format!("images/{stem}.jpg")), &img).unwrap();
+        let small = gems_data::image::downscale_area(&img, 48, 32);
+        gems_data::save_png(&real.join(format!("images_4/{stem}.png")), &small).unwrap();
+    }
+    std::fs::copy(
+        synth.join("poses_bounds.npy"),
+        real.join("poses_bounds.npy"),
+    )
+    .unwrap();
+    let mut model = gems_data::colmap::read_model(&synth.join("gt/sparse/0")).unwrap();
+    for im in &mut model.images {
+        im.name = im.name.replace(".png", ".jpg");
+    }
+    gems_data::colmap::write_model(
+        &real.join("sparse/0"),
+        &model,
+        gems_data::colmap::ModelFormat::Binary,
+    )
+    .unwrap();
+    gems_data::write_hold_marker(&real, 7).unwrap();
+    real
+}
+
+#[test]
+fn deblur_nerf_real_trains_read_only_with_colmap_at_downscale_4() {
+    let dir = tempfile::tempdir().unwrap();
+    let real = deblur_nerf_real(dir.path());
+    read_only(&real);
+    let before = snapshot(&real);
+    let out = dir.path().join("run");
+
+    let info = gems(&["info", s(&real)]);
+    ok(&info);
+    let text = stdout(&info);
+    assert!(
+        text.contains("Deblur-NeRF / LLFF") && text.contains("sparse/0: COLMAP model"),
+        "{text}"
+    );
+    assert!(
+        text.contains("poses_bounds.npy: read and checked"),
+        "{text}"
+    );
+    let info = gems(&["info", s(&real), "--downscale", "4", "--check"]);
+    ok(&info);
+    let text = stdout(&info);
+    assert!(
+        text.contains("resolution 48x32 (downscale 4)") && text.contains("check      ok"),
+        "{text}"
+    );
+
+    ok(&train(
+        &real,
+        &out,
+        &[
+            "--init",
+            "colmap",
+            "--downscale",
+            "4",
+            "--steps",
+            "10",
+            "--no-eval",
+        ],
+    ));
+    assert!(out.join("point_cloud.ply").is_file());
+    assert!(
+        !out.join("cache").exists(),
+        "the scene's own images_4/ is used, no copy is made"
+    );
+    ok(&gems(&[
+        "eval",
+        s(&out),
+        "--scene",
+        s(&real),
+        "--refine-steps",
+        "2",
+    ]));
+    assert!(out.join("metrics.json").is_file());
+    ok(&gems(&[
+        "render",
+        s(&out.join("point_cloud.ply")),
+        "-o",
+        s(&out.join("view.png")),
+        "--colmap",
+        s(&real.join("sparse/0")),
+        "--image",
+        "001.jpg",
+    ]));
+    ok(&gems(&["sfm", s(&real), "-o", s(&dir.path().join("sfm"))]));
+    // No events: one clear error, still nothing written into the scene.
+    let e = gems(&["edi", s(&real), "-o", s(&dir.path().join("edi"))]);
+    assert!(!e.status.success());
+    assert_eq!(snapshot(&real), before, "a command wrote into the scene");
+}
+
+#[test]
+fn every_layout_every_command_leaves_the_scene_untouched() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let gems_scene = tiny_scene(d);
+
+    // E2NeRF/BeNeRF-style: LLFF poses, events and exposure windows in seconds (text).
+    let e2 = d.join("e2nerf");
+    std::fs::create_dir_all(e2.join("events")).unwrap();
+    for e in std::fs::read_dir(gems_scene.join("images")).unwrap() {
+        let p = e.unwrap().path();
+        std::fs::create_dir_all(e2.join("images")).unwrap();
+        std::fs::copy(&p, e2.join("images").join(p.file_name().unwrap())).unwrap();
+    }
+    std::fs::copy(
+        gems_scene.join("poses_bounds.npy"),
+        e2.join("poses_bounds.npy"),
+    )
+    .unwrap();
+    let ev = gems_events::read_events(
+        &gems_scene.join("events.npz"),
+        &gems_events::ReadOptions::default(),
+    )
+    .unwrap();
+    gems_events::write_events_text(&e2.join("events/events.txt"), &ev).unwrap();
+    for name in ["exposure_start_ts.txt", "exposure_end_ts.txt"] {
+        let us = std::fs::read_to_string(gems_scene.join(name)).unwrap();
+        let secs: String = us
+            .lines()
+            .map(|l| format!("{:.6}\n", l.trim().parse::<f64>().unwrap() * 1e-6))
+            .collect();
+        std::fs::write(e2.join("events").join(name), secs).unwrap();
+    }
+
+    // A plain folder of video frames.
+    let frames = d.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    for (i, e) in std::fs::read_dir(gems_scene.join("images"))
+        .unwrap()
+        .enumerate()
+    {
+        std::fs::copy(e.unwrap().path(), frames.join(format!("{:04}.png", i + 1))).unwrap();
+    }
+
+    // nerfstudio: transforms.json with the ground-truth poses.
+    let ns = d.join("nerfstudio");
+    let gt = gems_data::open_scene(&gems_scene, &gems_data::OpenOptions::default()).unwrap();
+    let mut t = gems_data::nerfstudio::Transforms::default();
+    for v in &gt.views {
+        std::fs::create_dir_all(ns.join("images")).unwrap();
+        std::fs::copy(&v.image, ns.join("images").join(&v.name)).unwrap();
+        t.frames.push(gems_data::nerfstudio::Frame {
+            file_path: format!("images/{}", v.name),
+            pose: v.gt_pose.unwrap(),
+            camera: gems_data::nerfstudio::CameraSpec::Pinhole(v.intrinsics.unwrap()),
+            split: None,
+        });
+    }
+    gems_data::nerfstudio::write_transforms(&ns.join("transforms.json"), &t).unwrap();
+
+    let scenes = [&gems_scene, &e2, &frames, &ns];
+    for sc in scenes {
+        read_only(sc);
+    }
+    let before: Vec<_> = scenes.iter().map(|sc| snapshot(sc)).collect();
+    let o = |name: &str| d.join("out").join(name);
+
+    for sc in scenes {
+        ok(&gems(&["info", s(sc)]));
+        ok(&gems(&["info", s(sc), "--check"]));
+    }
+    let text = stdout(&gems(&["info", s(&e2)]));
+    assert!(
+        text.contains("E2NeRF") && text.contains("exposure windows (times in s)"),
+        "{text}"
+    );
+    // EDI on both event scenes (the seconds case included).
+    ok(&gems(&["edi", s(&gems_scene), "-o", s(&o("edi_gems"))]));
+    ok(&gems(&["edi", s(&e2), "-o", s(&o("edi_e2"))]));
+    // SfM and a short training on the photos folder (built-in SfM), the generated scene (ground
+    // truth, at half size: copies go to the output's cache) and nerfstudio.
+    ok(&gems(&["sfm", s(&frames), "-o", s(&o("sfm_frames"))]));
+    ok(&train(
+        &frames,
+        &o("train_frames"),
+        &["--steps", "5", "--no-eval"],
+    ));
+    ok(&train(
+        &gems_scene,
+        &o("train_gems"),
+        &["--init", "gt", "--steps", "5", "--downscale", "2"],
+    ));
+    assert!(o("train_gems").join("cache").is_dir());
+    ok(&gems(&[
+        "eval",
+        s(&o("train_gems")),
+        "--scene",
+        s(&gems_scene),
+        "--refine-steps",
+        "2",
+    ]));
+    ok(&gems(&[
+        "render",
+        s(&o("train_gems").join("point_cloud.ply")),
+        "-o",
+        s(&o("view.png")),
+        "--colmap",
+        s(&gems_scene.join("gt/sparse/0")),
+        "--image",
+        "001.png",
+    ]));
+    ok(&gems(&["sfm", s(&ns), "-o", s(&o("sfm_ns"))]));
+    for (sc, b) in scenes.iter().zip(&before) {
+        assert_eq!(&snapshot(sc), b, "a command wrote into {}", sc.display());
+    }
+}
+
+#[test]
+fn info_check_reports_each_problem_and_train_refuses_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    // A corrupt PNG whose header still reads: only decoding finds it.
+    let p = scene.join("images/003.png");
+    let bytes = std::fs::read(&p).unwrap();
+    std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+    ok(&gems(&["info", s(&scene)]));
+    let out = gems(&["info", s(&scene), "--check"]);
+    assert!(!out.status.success());
+    let text = stdout(&out);
+    let lines: Vec<&str> = text.lines().filter(|l| l.starts_with("problem")).collect();
+    assert_eq!(lines.len(), 1, "{text}");
+    assert!(lines[0].contains("003.png"), "{text}");
+    // Training validates the same way before any work (no SfM, nothing trained).
+    let run = dir.path().join("run");
+    let out = train(&scene, &run, &["--init", "gt", "--steps", "5"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("003.png") && err.contains("problem"), "{err}");
+    assert!(!run.join("config.toml").exists());
+    // Each cause once, and no colour codes when stderr is not a terminal.
+    assert!(!err.contains('\u{1b}'), "{err}");
+    let missing = gems(&["info", s(&dir.path().join("nope"))]);
+    let err = String::from_utf8_lossy(&missing.stderr);
+    let line = err.lines().find(|l| l.starts_with("error:")).unwrap();
+    let parts: Vec<&str> = line.split(": ").collect();
+    let mut dedup = parts.clone();
+    dedup.dedup();
+    assert_eq!(parts, dedup, "a cause is repeated: {line}");
+}
+
+#[test]
+fn exif_focal_is_used_and_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let photos = dir.path().join("photos");
+    std::fs::create_dir_all(&photos).unwrap();
+    // A phone's EXIF: only the 35 mm equivalent focal, 30 mm → 30 / 36 · 96 px = 80 px.
+    let field = exif::Field {
+        tag: exif::Tag::FocalLengthIn35mmFilm,
+        ifd_num: exif::In::PRIMARY,
+        value: exif::Value::Short(vec![30]),
+    };
+    let mut writer = exif::experimental::Writer::new();
+    writer.push_field(&field);
+    let mut tiff = std::io::Cursor::new(Vec::new());
+    writer.write(&mut tiff, false).unwrap();
+    let tiff = tiff.into_inner();
+    let mut app1 = vec![0xFF, 0xE1];
+    app1.extend_from_slice(&u16::try_from(8 + tiff.len()).unwrap().to_be_bytes());
+    app1.extend_from_slice(b"Exif\0\0");
+    app1.extend_from_slice(&tiff);
+    for e in std::fs::read_dir(scene.join("images")).unwrap() {
+        let p = e.unwrap().path();
+        let img = gems_data::load_image(&p).unwrap();
+        let jpg = photos.join(p.with_extension("jpg").file_name().unwrap());
+        gems_data::image::save_image_auto(&jpg, &img).unwrap();
+        let bytes = std::fs::read(&jpg).unwrap();
+        let mut out = bytes[..2].to_vec();
+        out.extend_from_slice(&app1);
+        out.extend_from_slice(&bytes[2..]);
+        std::fs::write(&jpg, out).unwrap();
+    }
+    let text = stdout(&gems(&["info", s(&photos)]));
+    assert!(
+        text.contains("focal 80.0 px for the SfM from EXIF FocalLengthIn35mmFilm 30 mm"),
+        "{text}"
+    );
+    let out = gems(&["sfm", s(&photos), "-o", s(&dir.path().join("sfm"))]);
+    ok(&out);
+    assert!(
+        stdout(&out).contains("focal 80.0 px from EXIF"),
+        "{}",
+        stdout(&out)
+    );
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("sfm/sfm_report.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(report["focal"].as_f64(), Some(80.0), "{report}");
+    // --focal overrides it.
+    let out = gems(&[
+        "sfm",
+        s(&photos),
+        "-o",
+        s(&dir.path().join("sfm2")),
+        "--focal",
+        "83.0",
+    ]);
+    ok(&out);
+    assert!(!stdout(&out).contains("from EXIF"));
+}

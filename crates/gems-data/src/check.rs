@@ -67,7 +67,10 @@ fn check_image(path: &Path, want: (u32, u32), what: &str) -> Option<Problem> {
         ));
     }
     match load_image(path) {
-        Err(e) => Some(problem(path, format!("{what} does not decode: {}", inner(&e)))),
+        Err(e) => Some(problem(
+            path,
+            format!("{what} does not decode: {}", inner(&e)),
+        )),
         Ok(img) if (img.width, img.height) != want => Some(problem(
             path,
             format!(
@@ -109,25 +112,37 @@ fn check_view(v: &View, original: Option<PathBuf>) -> Vec<Problem> {
     if let Some(p) = &v.pose
         && !pose_finite(p)
     {
-        out.push(problem(&v.image, "starting pose has NaN or infinite values"));
+        out.push(problem(
+            &v.image,
+            "starting pose has NaN or infinite values",
+        ));
     }
     if let Some(p) = &v.gt_pose
         && !pose_finite(p)
     {
-        out.push(problem(&v.image, "ground-truth pose has NaN or infinite values"));
+        out.push(problem(
+            &v.image,
+            "ground-truth pose has NaN or infinite values",
+        ));
     }
     if v.gt_subframe_poses
         .as_ref()
         .is_some_and(|s| !s.iter().all(pose_finite))
     {
-        out.push(problem(&v.image, "a ground-truth sub-frame pose is not finite"));
+        out.push(problem(
+            &v.image,
+            "a ground-truth sub-frame pose is not finite",
+        ));
     }
     if let Some(k) = &v.intrinsics {
         let ok = [k.fx, k.fy, k.cx, k.cy].iter().all(|x| x.is_finite()) && k.fx > 0.0 && k.fy > 0.0;
         if !ok {
             out.push(problem(
                 &v.image,
-                format!("intrinsics are not usable: fx {} fy {} cx {} cy {}", k.fx, k.fy, k.cx, k.cy),
+                format!(
+                    "intrinsics are not usable: fx {} fy {} cx {} cy {}",
+                    k.fx, k.fy, k.cx, k.cy
+                ),
             ));
         }
     }
@@ -140,9 +155,12 @@ fn sensor_size(scene: &Scene) -> Option<(u32, u32)> {
     if scene.downscale <= 1 {
         return Some((v.width, v.height));
     }
-    [scene.root.join("images").join(&v.name), scene.root.join(&v.name)]
-        .iter()
-        .find_map(|p| image_dimensions(p).ok())
+    [
+        scene.root.join("images").join(&v.name),
+        scene.root.join(&v.name),
+    ]
+    .iter()
+    .find_map(|p| image_dimensions(p).ok())
 }
 
 fn check_events(scene: &Scene) -> Vec<Problem> {
@@ -208,7 +226,11 @@ fn check_events(scene: &Scene) -> Vec<Problem> {
                 if c.views != scene.views.len() {
                     out.push(problem(
                         p,
-                        format!("{} views of bins but the scene has {}", c.views, scene.views.len()),
+                        format!(
+                            "{} views of bins but the scene has {}",
+                            c.views,
+                            scene.views.len()
+                        ),
                     ));
                 }
                 if let Some((w, h)) = sensor
@@ -216,7 +238,10 @@ fn check_events(scene: &Scene) -> Vec<Problem> {
                 {
                     out.push(problem(
                         p,
-                        format!("bins are {}x{} but the images are {w}x{h}", c.width, c.height),
+                        format!(
+                            "bins are {}x{} but the images are {w}x{h}",
+                            c.width, c.height
+                        ),
                     ));
                 }
                 if c.data.iter().any(|v| !v.is_finite()) {
@@ -235,15 +260,21 @@ pub fn check_scene(scene: &Scene) -> Vec<Problem> {
         out.push(problem(&scene.root, "no views"));
     }
     if scene.train_views().next().is_none() && !scene.views.is_empty() {
-        out.push(problem(&scene.root, "no training views (check the hold= marker)"));
+        out.push(problem(
+            &scene.root,
+            "no training views (check the hold= marker)",
+        ));
     }
     let per_view: Vec<Vec<Problem>> = scene
         .views
         .par_iter()
         .map(|v| {
-            let original = [scene.root.join("images").join(&v.name), scene.root.join(&v.name)]
-                .into_iter()
-                .find(|p| p.is_file());
+            let original = [
+                scene.root.join("images").join(&v.name),
+                scene.root.join(&v.name),
+            ]
+            .into_iter()
+            .find(|p| p.is_file());
             check_view(v, original)
         })
         .collect();

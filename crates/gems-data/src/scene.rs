@@ -285,7 +285,9 @@ pub fn detect_layout(root: &Path) -> Result<Layout> {
 fn identify(root: &Path, layout: Layout, events: &EventFiles) -> String {
     let has = |n: &str| root.join(n).exists();
     match layout {
-        Layout::Llff if has("images_gt_blur") || has("images_gt_novel") || has("pose_bounds.npy") => {
+        Layout::Llff
+            if has("images_gt_blur") || has("images_gt_novel") || has("pose_bounds.npy") =>
+        {
             "EBAD-NeRF".into()
         }
         Layout::Llff if has("poses_bounds_subframes.npy") => "ExBluRF".into(),
@@ -548,7 +550,10 @@ fn view_images(
         return Ok((names, full));
     }
     if scaled_dir.is_dir() {
-        return Ok((names, pair_scaled(&full, &list_images(&scaled_dir)?, &scaled_dir)?));
+        return Ok((
+            names,
+            pair_scaled(&full, &list_images(&scaled_dir)?, &scaled_dir)?,
+        ));
     }
     let dst = cache.path(
         &format!("{base}_{f}"),
@@ -861,7 +866,8 @@ fn attach_sharp(
 ) -> Result<()> {
     let n_train = views.iter().filter(|v| v.split == Split::Train).count();
     let n_novel = views.len() - n_train;
-    let pick = |s: Split| -> Vec<usize> { (0..views.len()).filter(|&i| views[i].split == s).collect() };
+    let pick =
+        |s: Split| -> Vec<usize> { (0..views.len()).filter(|&i| views[i].split == s).collect() };
     let targets: Vec<usize> = match only {
         Some(s) if sharp.len() == pick(s).len() => pick(s),
         None if sharp.len() == views.len() => (0..views.len()).collect(),
@@ -1103,7 +1109,10 @@ fn open_nerfstudio(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Sce
                         let rel = parent.strip_prefix(root).unwrap_or(&parent);
                         let d = cache.path(
                             &format!("{}_{}", rel.display(), opts.downscale),
-                            &format!("{base}_{} (images downscaled by {})", opts.downscale, opts.downscale),
+                            &format!(
+                                "{base}_{} (images downscaled by {})",
+                                opts.downscale, opts.downscale
+                            ),
                         )?;
                         ensure_downscaled(&parent, &d, opts.downscale)?;
                         d

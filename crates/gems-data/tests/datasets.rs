@@ -55,7 +55,12 @@ fn make_deblur_nerf_real(root: &Path, n: usize) {
     let (w, h) = (32, 24);
     for i in 0..n {
         write_img(&root.join(format!("images/{i:03}.jpg")), w, h, i as u32);
-        write_img(&root.join(format!("images_4/{i:03}.png")), w / 4, h / 4, i as u32);
+        write_img(
+            &root.join(format!("images_4/{i:03}.png")),
+            w / 4,
+            h / 4,
+            i as u32,
+        );
     }
     llff::write_poses_bounds(&root.join("poses_bounds.npy"), &rows(n, w, h)).unwrap();
     let model = SparseModel {
@@ -99,7 +104,10 @@ fn deblur_nerf_real_opens_at_its_evaluation_resolution_read_only() {
     assert_eq!(s.pose_source, PoseSource::Sfm);
     assert_eq!(s.sfm_dir.as_deref(), Some(root.join("sparse/0").as_path()));
     let k = v.intrinsics.unwrap();
-    assert!((k.fx - 7.5).abs() < 1e-12 && (k.cx - 4.0).abs() < 1e-12, "{k:?}");
+    assert!(
+        (k.fx - 7.5).abs() < 1e-12 && (k.cx - 4.0).abs() < 1e-12,
+        "{k:?}"
+    );
     let p = v.pose.unwrap();
     assert!((p.translation[0] - pose(2).translation[0]).abs() < 1e-12);
     // … and the poses file is read, checked and said to be unused for poses.
@@ -109,7 +117,8 @@ fn deblur_nerf_real_opens_at_its_evaluation_resolution_read_only() {
         .map(|u| format!("{}: {}", u.path.display(), u.role))
         .collect();
     assert!(
-        uses.iter().any(|u| u.contains("sparse/0") && u.contains("--init colmap")),
+        uses.iter()
+            .any(|u| u.contains("sparse/0") && u.contains("--init colmap")),
         "{uses:?}"
     );
     assert!(
@@ -131,7 +140,10 @@ fn deblur_nerf_real_opens_at_its_evaluation_resolution_read_only() {
     // The count is checked against the poses file.
     llff::write_poses_bounds(&root.join("poses_bounds.npy"), &rows(8, 32, 24)).unwrap();
     let e = open_scene(root, &opts).unwrap_err().to_string();
-    assert!(e.contains("poses_bounds.npy") && e.contains("8 poses"), "{e}");
+    assert!(
+        e.contains("poses_bounds.npy") && e.contains("8 poses"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -162,7 +174,12 @@ fn every_dataset_is_recognised() {
         write_img(&eb.join(format!("images_gt_blur/{i:03}.png")), w, h, 50 + i);
     }
     for i in [0u32, 3] {
-        write_img(&eb.join(format!("images_gt_novel/{i:03}.png")), w, h, 90 + i);
+        write_img(
+            &eb.join(format!("images_gt_novel/{i:03}.png")),
+            w,
+            h,
+            90 + i,
+        );
     }
     let s = open_scene(&eb, &OpenOptions::default()).unwrap();
     assert_eq!((s.layout, s.dataset.as_str()), (Layout::Llff, "EBAD-NeRF"));
@@ -192,7 +209,10 @@ fn every_dataset_is_recognised() {
         write_img(&bad.join(format!("images_test/{i:03}.png")), w, h, 9 + i);
     }
     let s = open_scene(&bad, &OpenOptions::default()).unwrap();
-    assert_eq!((s.layout, s.dataset.as_str()), (Layout::Gems, "BAD-Gaussians / PRISM3D"));
+    assert_eq!(
+        (s.layout, s.dataset.as_str()),
+        (Layout::Gems, "BAD-Gaussians / PRISM3D")
+    );
 
     // A folder of phone photos or video frames.
     let photos = dir.path().join("frames");
@@ -201,7 +221,10 @@ fn every_dataset_is_recognised() {
     }
     let before = snapshot(&photos);
     let s = open_scene(&photos, &OpenOptions::default()).unwrap();
-    assert_eq!((s.layout, s.dataset.as_str()), (Layout::Folder, "photos or video frames"));
+    assert_eq!(
+        (s.layout, s.dataset.as_str()),
+        (Layout::Folder, "photos or video frames")
+    );
     assert_eq!(s.train_views().count(), 5);
     assert!(s.views.iter().all(|v| v.pose.is_none()));
     let cache = dir.path().join("cache");
@@ -231,7 +254,9 @@ fn check_finds_every_problem_one_line_each() {
         40,
         24,
         (0..n).map(|i| i * 10_000).collect(),
-        (0..n).map(|i| if i == 50 { 39 } else { (i % 32) as u16 }).collect(),
+        (0..n)
+            .map(|i| if i == 50 { 39 } else { (i % 32) as u16 })
+            .collect(),
         (0..n).map(|i| (i % 24) as u16).collect(),
         (0..n).map(|i| if i % 2 == 0 { 1 } else { -1 }).collect(),
     )
@@ -253,7 +278,10 @@ fn check_finds_every_problem_one_line_each() {
         .map(ToString::to_string)
         .collect();
     assert_eq!(problems.len(), 3, "{problems:#?}");
-    assert!(problems[0].contains("002.jpg") && problems[0].contains("truncated"), "{problems:#?}");
+    assert!(
+        problems[0].contains("002.jpg") && problems[0].contains("truncated"),
+        "{problems:#?}"
+    );
     assert!(problems[1].contains("events.npz") && problems[1].contains("x = 39"));
     assert!(problems[2].contains("003.jpg") && problems[2].contains("holds no events"));
 }

@@ -392,9 +392,15 @@ fn an_existing_downscaled_folder_is_paired_by_stem_then_by_order() {
         ..OpenOptions::default()
     };
     let s = open_scene(root, &opts).unwrap();
-    assert_eq!(s.views[1].name, "001.png", "views keep the images/ name (SfM key)");
+    assert_eq!(
+        s.views[1].name, "001.png",
+        "views keep the images/ name (SfM key)"
+    );
     assert_eq!(s.views[1].image, root.join("images_2/001.jpg"));
-    assert!(s.views[1].pose.is_some(), "the SfM model matches by the images/ name");
+    assert!(
+        s.views[1].pose.is_some(),
+        "the SfM model matches by the images/ name"
+    );
     // Names differ completely but the count agrees: sorted order.
     std::fs::remove_dir_all(root.join("images_2")).unwrap();
     for (i, n) in ["a.png", "b.png", "c.png", "d.png"].iter().enumerate() {
@@ -406,7 +412,10 @@ fn an_existing_downscaled_folder_is_paired_by_stem_then_by_order() {
     // A partial folder cannot be paired: one error, and the folder is left alone.
     std::fs::remove_file(root.join("images_2/d.png")).unwrap();
     let e = open_scene(root, &opts).unwrap_err().to_string();
-    assert!(e.contains("images_2") && e.contains("holds 3 images") && e.contains("4"), "{e}");
+    assert!(
+        e.contains("images_2") && e.contains("holds 3 images") && e.contains("4"),
+        "{e}"
+    );
     assert_eq!(std::fs::read_dir(root.join("images_2")).unwrap().count(), 3);
 }
 
@@ -766,10 +775,18 @@ fn time_units_are_detected_across_a_scenes_files() {
         .iter()
         .map(|w| w.events)
         .collect();
-    assert_eq!(counts, [Some(21), Some(21), Some(21)], "every window holds events");
+    assert_eq!(
+        counts,
+        [Some(21), Some(21), Some(21)],
+        "every window holds events"
+    );
     assert!(gems_data::check::check_scene(&s).is_empty());
     // The same windows in µs are read as µs.
-    std::fs::write(root.join("exposure_start_ts.txt"), "100000\n400000\n700000\n").unwrap();
+    std::fs::write(
+        root.join("exposure_start_ts.txt"),
+        "100000\n400000\n700000\n",
+    )
+    .unwrap();
     std::fs::write(root.join("exposure_end_ts.txt"), "200000\n500000\n800000\n").unwrap();
     let s = open_scene(root, &OpenOptions::default()).unwrap();
     assert_eq!(s.views[1].exposure.unwrap().start, 400_000);

@@ -64,7 +64,9 @@ impl std::str::FromStr for TimeUnit {
             "ms" => Ok(TimeUnit::Milliseconds),
             "us" | "µs" => Ok(TimeUnit::Microseconds),
             "ns" => Ok(TimeUnit::Nanoseconds),
-            other => Err(format!("unknown time unit {other:?} (expected s, ms, us or ns)")),
+            other => Err(format!(
+                "unknown time unit {other:?} (expected s, ms, us or ns)"
+            )),
         }
     }
 }

@@ -98,7 +98,11 @@ pub(crate) fn read_raw_times(path: &Path) -> Result<Vec<f64>, EventError> {
             .ok_or_else(|| {
                 EventError::format(
                     path,
-                    format!("line {}: bad timestamp '{}'", i + 1, String::from_utf8_lossy(f)),
+                    format!(
+                        "line {}: bad timestamp '{}'",
+                        i + 1,
+                        String::from_utf8_lossy(f)
+                    ),
                 )
             })?;
         out.push(v);

@@ -184,9 +184,10 @@ pub fn detect_units(series: &[TimeSummary]) -> Result<Vec<TimeUnit>, String> {
     survivors.retain(|combo| {
         series.iter().zip(combo).all(|(e, &ue)| {
             e.kind != SeriesKind::Events
-                || series.iter().zip(combo).all(|(x, &ux)| {
-                    x.kind != SeriesKind::Exposures || consistent(e, ue, x, ux)
-                })
+                || series
+                    .iter()
+                    .zip(combo)
+                    .all(|(x, &ux)| x.kind != SeriesKind::Exposures || consistent(e, ue, x, ux))
         })
     });
     let ranges = series
@@ -209,8 +210,7 @@ pub fn detect_units(series: &[TimeSummary]) -> Result<Vec<TimeUnit>, String> {
                     .count()
             };
             let best = survivors.iter().map(score).max().expect("non-empty");
-            let top: Vec<&Vec<TimeUnit>> =
-                survivors.iter().filter(|c| score(c) == best).collect();
+            let top: Vec<&Vec<TimeUnit>> = survivors.iter().filter(|c| score(c) == best).collect();
             if let [one] = top.as_slice() {
                 return Ok((*one).clone());
             }
@@ -220,9 +220,7 @@ pub fn detect_units(series: &[TimeSummary]) -> Result<Vec<TimeUnit>, String> {
                     series
                         .iter()
                         .zip(c.iter())
-                        .map(|(s, u)| {
-                            format!("{} {}..{} {}", s.label, s.min, s.max, u.symbol())
-                        })
+                        .map(|(s, u)| format!("{} {}..{} {}", s.label, s.min, s.max, u.symbol()))
                         .collect::<Vec<_>>()
                         .join(" with ")
                 })

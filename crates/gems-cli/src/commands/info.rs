@@ -64,7 +64,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             println!("problem    {p}");
         }
         if !problems.is_empty() {
-            anyhow::bail!("{} problem(s) found in {}", problems.len(), args.scene.display());
+            anyhow::bail!(
+                "{} problem(s) found in {}",
+                problems.len(),
+                args.scene.display()
+            );
         }
         println!("check      ok: every image decoded, every file read in full");
     }
