@@ -57,11 +57,11 @@ pub fn resolve_time_units(
 ) -> Result<TimeUnits> {
     let mut series = Vec::new();
     let mut stream_at = None;
-    if let Some(p) = &files.stream {
-        if let Some(s) = gems_events::event_time_summary(p).map_err(DataError::Events)? {
-            stream_at = Some(series.len());
-            series.push(s);
-        }
+    if let Some(p) = &files.stream
+        && let Some(s) = gems_events::event_time_summary(p).map_err(DataError::Events)?
+    {
+        stream_at = Some(series.len());
+        series.push(s);
     }
     let mut exposure_at = None;
     if let Some(d) = &files.exposure_dir {

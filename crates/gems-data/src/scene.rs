@@ -487,14 +487,14 @@ fn pair_scaled(full: &[PathBuf], scaled: &[PathBuf], dir: &Path) -> Result<Vec<P
     }
     let by_stem: std::collections::HashMap<String, &PathBuf> =
         scaled.iter().map(|p| (stem(p), p)).collect();
-    if by_stem.len() == scaled.len() && scaled.len() == full.len() {
-        if let Some(paired) = full
+    if by_stem.len() == scaled.len()
+        && scaled.len() == full.len()
+        && let Some(paired) = full
             .iter()
             .map(|p| by_stem.get(&stem(p)).map(|q| (*q).clone()))
             .collect::<Option<Vec<_>>>()
-        {
-            return Ok(paired);
-        }
+    {
+        return Ok(paired);
     }
     if scaled.len() == full.len() {
         tracing::warn!(
