@@ -61,6 +61,10 @@ pub struct Args {
     /// `images_<f>/` is used when it exists; otherwise copies are made in the cache.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
+    /// Hold-out interval overriding the scene's `hold=<n>` marker (n < 1: no hold-out), e.g. an
+    /// ExBluRF scene's llffhold when the folder has no marker.
+    #[arg(long, allow_negative_numbers = true)]
+    pub hold: Option<i64>,
     /// Folder for downscaled or undistorted copies the scene lacks (default: `<output>/cache`).
     /// Nothing is ever written into the scene folder.
     #[arg(long)]
@@ -124,6 +128,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .unwrap_or_else(|| args.output.join("cache")),
         ),
         time_unit: args.time_unit,
+        hold: args.hold,
         ..Default::default()
     };
     // Validate the whole scene (every image decoded, poses, events) before any long work.
