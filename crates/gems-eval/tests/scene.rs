@@ -78,9 +78,10 @@ fn ground_truth_and_held_out_views_from_a_scene() {
         "{n_train} train, {n_novel} novel"
     );
 
+    let cache = tempfile::tempdir().unwrap();
     for factor in [1, 2] {
         let out = trained_on(&full, factor, cfg.fov_x_deg);
-        let scene = open_scene_for(&out, dir.path(), None, None).unwrap();
+        let scene = open_scene_for(&out, dir.path(), None, Some(cache.path())).unwrap();
         assert_eq!(scene.downscale, factor);
         let data = eval_data_from_scene(&out, &scene).unwrap();
         assert_eq!(data.train_gt.iter().flatten().count(), n_train);
