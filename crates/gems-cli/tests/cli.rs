@@ -321,6 +321,10 @@ fn deblur_nerf_real_trains_read_only_with_colmap_at_downscale_4() {
         ],
     ));
     assert!(out.join("point_cloud.ply").is_file());
+    let trained = gems_train::io::TrainOutput::load(&out).unwrap();
+    let k = &trained.views[0].intrinsics;
+    assert_eq!((k.width, k.height), (48, 32), "trained on images_4/");
+    assert_eq!(trained.views[0].name, "001.jpg");
     assert!(
         !out.join("cache").exists(),
         "the scene's own images_4/ is used, no copy is made"
@@ -411,7 +415,58 @@ fn every_layout_every_command_leaves_the_scene_untouched() {
     }
     gems_data::nerfstudio::write_transforms(&ns.join("transforms.json"), &t).unwrap();
 
-    let scenes = [&gems_scene, &e2, &frames, &ns];
+    // ExBluRF: LLFF poses with ground-truth sub-frames, no manifest.
+    let copy = |from: &Path, to: &Path, keep: &dyn Fn(usize) -> bool| {
+        std::fs::create_dir_all(to).unwrap();
+        let mut files: Vec<PathBuf> = std::fs::read_dir(from)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        files.sort();
+        for (_, f) in files.iter().enumerate().filter(|(i, _)| keep(*i)) {
+            std::fs::copy(f, to.join(f.file_name().unwrap())).unwrap();
+        }
+    };
+    let ex = d.join("exblurf");
+    copy(&gems_scene.join("images"), &ex.join("images"), &|_| true);
+    for f in ["poses_bounds.npy", "poses_bounds_subframes.npy"] {
+        std::fs::copy(gems_scene.join(f), ex.join(f)).unwrap();
+    }
+    // BAD-Gaussians: images_test/ for the training views only, sparse/0, hold=4.
+    let bad = d.join("bad");
+    copy(&gems_scene.join("images"), &bad.join("images"), &|_| true);
+    copy(
+        &gems_scene.join("images_test"),
+        &bad.join("images_test"),
+        &|i| i % 4 != 0,
+    );
+    copy(
+        &gems_scene.join("gt/sparse/0"),
+        &bad.join("sparse/0"),
+        &|_| true,
+    );
+    gems_data::write_hold_marker(&bad, 4).unwrap();
+    // EBAD-NeRF: pose_bounds.npy, sharp images apart in images_gt_blur/ and images_gt_novel/.
+    let ebad = d.join("ebad");
+    copy(&gems_scene.join("images"), &ebad.join("images"), &|_| true);
+    copy(
+        &gems_scene.join("images_test"),
+        &ebad.join("images_gt_blur"),
+        &|i| i % 4 != 0,
+    );
+    copy(
+        &gems_scene.join("images_test"),
+        &ebad.join("images_gt_novel"),
+        &|i| i % 4 == 0,
+    );
+    std::fs::copy(
+        gems_scene.join("poses_bounds.npy"),
+        ebad.join("pose_bounds.npy"),
+    )
+    .unwrap();
+    gems_data::write_hold_marker(&ebad, 4).unwrap();
+
+    let scenes = [&gems_scene, &e2, &frames, &ns, &ex, &bad, &ebad];
     for sc in scenes {
         read_only(sc);
     }
@@ -463,6 +518,30 @@ fn every_layout_every_command_leaves_the_scene_untouched() {
         "001.png",
     ]));
     ok(&gems(&["sfm", s(&ns), "-o", s(&o("sfm_ns"))]));
+    ok(&gems(&["sfm", s(&ex), "-o", s(&o("sfm_ex"))]));
+    ok(&train(
+        &bad,
+        &o("train_bad"),
+        &[
+            "--init",
+            "colmap",
+            "--steps",
+            "5",
+            "--downscale",
+            "2",
+            "--no-eval",
+        ],
+    ));
+    for (sc, want) in [
+        (&ex, "ExBluRF"),
+        (&bad, "BAD-Gaussians / PRISM3D"),
+        (&ebad, "EBAD-NeRF"),
+    ] {
+        let text = stdout(&gems(&["info", s(sc)]));
+        assert!(text.contains(want), "{text}");
+    }
+    let text = stdout(&gems(&["info", s(&ebad)]));
+    assert!(text.contains("6 deblur-eval, 2 novel-view eval"), "{text}");
     for (sc, b) in scenes.iter().zip(&before) {
         assert_eq!(&snapshot(sc), b, "a command wrote into {}", sc.display());
     }
@@ -490,8 +569,18 @@ fn info_check_reports_each_problem_and_train_refuses_first() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("003.png") && err.contains("problem"), "{err}");
     assert!(!run.join("config.toml").exists());
-    // Each cause once, and no colour codes when stderr is not a terminal.
-    assert!(!err.contains('\u{1b}'), "{err}");
+    // No colour codes when stderr is not a terminal (a log file, a pipe).
+    let logged = Command::new(env!("CARGO_BIN_EXE_gems"))
+        .args(["info", s(&scene)])
+        .env("RUST_LOG", "debug")
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&logged.stderr);
+    assert!(
+        log.contains("opened scene") && !log.contains('\u{1b}'),
+        "{log}"
+    );
+    // Each cause once.
     let missing = gems(&["info", s(&dir.path().join("nope"))]);
     let err = String::from_utf8_lossy(&missing.stderr);
     let line = err.lines().find(|l| l.starts_with("error:")).unwrap();

@@ -417,20 +417,18 @@ pub fn report_input(
 
 /// Opens the scene a result was trained on at the training resolution: the downscale factor is
 /// inferred from the first training view found in the scene (full-resolution width / trained
-/// width). `hold` overrides the scene's hold-out marker as at training time. Downscaled copies the
-/// scene lacks are made in `cache_dir` (never in the scene).
+/// width). `opts` carries what training was given: the hold-out interval, the cache folder for
+/// downscaled copies the scene lacks (never the scene), the time unit; its `downscale` is ignored.
 pub fn open_scene_for(
     output: &TrainOutput,
     root: &Path,
-    hold: Option<i64>,
-    cache_dir: Option<&Path>,
+    opts: &OpenOptions,
 ) -> Result<Scene, EvalError> {
     let full = open_scene(
         root,
         &OpenOptions {
             downscale: 1,
-            hold,
-            ..OpenOptions::default()
+            ..opts.clone()
         },
     )?;
     let factor = output
@@ -457,9 +455,7 @@ pub fn open_scene_for(
         root,
         &OpenOptions {
             downscale: factor,
-            hold,
-            cache_dir: cache_dir.map(Path::to_path_buf),
-            ..OpenOptions::default()
+            ..opts.clone()
         },
     )?)
 }

@@ -81,7 +81,15 @@ fn ground_truth_and_held_out_views_from_a_scene() {
     let cache = tempfile::tempdir().unwrap();
     for factor in [1, 2] {
         let out = trained_on(&full, factor, cfg.fov_x_deg);
-        let scene = open_scene_for(&out, dir.path(), None, Some(cache.path())).unwrap();
+        let scene = open_scene_for(
+            &out,
+            dir.path(),
+            &gems_data::OpenOptions {
+                cache_dir: Some(cache.path().to_path_buf()),
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert_eq!(scene.downscale, factor);
         let data = eval_data_from_scene(&out, &scene).unwrap();
         assert_eq!(data.train_gt.iter().flatten().count(), n_train);
@@ -119,7 +127,7 @@ fn ground_truth_and_held_out_views_from_a_scene() {
         v.name = format!("other_{}", v.name);
     }
     assert!(
-        open_scene_for(&stranger, dir.path(), None, None)
+        open_scene_for(&stranger, dir.path(), &Default::default())
             .unwrap_err()
             .to_string()
             .contains("no training view")

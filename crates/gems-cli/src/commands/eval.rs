@@ -26,6 +26,9 @@ pub struct Args {
     /// Folder for downscaled copies the scene lacks (default: `<output>/cache`, as in training).
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
+    /// Unit of the scene's event and exposure times (s, ms, us, ns), as given to training.
+    #[arg(long)]
+    pub time_unit: Option<gems_events::TimeUnit>,
     /// Adam steps of the test-time pose refinement of each held-out view.
     #[arg(long, default_value_t = 100)]
     pub refine_steps: usize,
@@ -48,7 +51,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .cache_dir
         .clone()
         .unwrap_or_else(|| args.output.join("cache"));
-    let scene = gems_eval::open_scene_for(&output, &args.scene, args.hold, Some(&cache))?;
+    let opts = gems_data::OpenOptions {
+        hold: args.hold,
+        cache_dir: Some(cache),
+        time_unit: args.time_unit,
+        ..Default::default()
+    };
+    let scene = gems_eval::open_scene_for(&output, &args.scene, &opts)?;
     let mut data = gems_eval::eval_data_from_scene(&output, &scene)?;
     super::pipeline::attach_edi(&mut data, &output, &args.output)?;
     let lpips = if args.lpips.is_empty() {
