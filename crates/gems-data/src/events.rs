@@ -1,6 +1,8 @@
 //! Finding a scene's event data. Reading and slicing events is `gems_events`' job; this module
-//! only locates the files by the dataset conventions (events.md §3, deblur.md §4) so the scene
-//! can say what it holds.
+//! only locates the files by the dataset conventions (E2NeRF `iCVTEAM/E2NeRF`, BeNeRF's
+//! repackaging with `exposure_start_ts.txt`/`exposure_end_ts.txt`, PRISM3D-E
+//! `GopiRajuMatta/PRISM3D`'s `events_bins_<k>.pt`) so the scene can say what it holds, and
+//! resolves the unit of their times ([`resolve_time_units`]).
 
 use std::path::{Path, PathBuf};
 

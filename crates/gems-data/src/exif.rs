@@ -3,7 +3,8 @@
 //!
 //! Two ways, in this order (EXIF 2.32, CIPA DC-008):
 //! 1. `FocalLength` (mm) × `FocalPlaneXResolution` (pixels per `FocalPlaneResolutionUnit`: 2 inch,
-//!    3 cm, 4 mm, 5 µm) — the physical focal on the sensor, exact when the camera writes it. The
+//!    the default, 3 cm; 4 mm and 5 µm as TIFF/EP and exiftool read them) — the physical focal on
+//!    the sensor, exact when the camera writes it. The
 //!    resolution refers to the original pixel grid (`PixelXDimension`), so the result is scaled
 //!    to the file's actual width when it was resized.
 //! 2. `FocalLengthIn35mmFilm`: the focal of a 36 × 24 mm frame with the same field of view, so

@@ -13,10 +13,19 @@
 //!    *training* image (BAD-Gaussians: held-out views then have no sharp image) — told apart by
 //!    count. Without `images_test/` every view is a training view (nothing to evaluate on).
 //! 2. **Nerfstudio** — `transforms.json`.
-//! 3. **Llff** — Deblur-NeRF / ExBluRF: `poses_bounds.npy` + `images/` holding blurry training
-//!    images and sharp test images interleaved: `i % llffhold == 0` is a sharp novel-view test
-//!    image (hold from [`OpenOptions::hold`], else `hold=` marker, else 8). Optional ExBluRF
-//!    `poses_bounds_subframes.npy` gives ground-truth sub-frame poses.
+//! 3. **Llff** — Deblur-NeRF / ExBluRF / E2NeRF / EBAD-NeRF: `poses_bounds.npy` (EBAD-NeRF:
+//!    `pose_bounds.npy`) + `images/` holding blurry training images and sharp test images
+//!    interleaved: `i % llffhold == 0` is a sharp novel-view test image (hold from
+//!    [`OpenOptions::hold`], else `hold=` marker, else 8). EBAD-NeRF keeps the sharp images apart
+//!    instead: `images_gt_blur/` (training views) and `images_gt_novel/` (held-out views).
+//!    E2NeRF's real scenes hold `k` poses per image (the middle one is used). Optional ExBluRF
+//!    `poses_bounds_subframes.npy` gives ground-truth sub-frame poses. A `sparse/0/` beside the
+//!    poses file (Deblur-NeRF real scenes as redistributed) gives poses, intrinsics and points;
+//!    the poses file is then read and checked against the images only ([`Scene::uses`] says so).
+//! 4. **Folder** — a plain folder of photos or video frames: every image a training view, no
+//!    poses (the SfM makes them).
+//!
+//! [`Scene::dataset`] names the dataset a folder looks like, from the files each one ships.
 //!
 //! # Poses
 //! [`View::pose`] is the pose to start from (SfM model, else LLFF file, else transforms.json);
