@@ -137,6 +137,26 @@ fn deblur_nerf_real_opens_at_its_evaluation_resolution_read_only() {
     assert!(gems_data::check::check_scene(&s).is_empty());
     assert_eq!(snapshot(root), before);
 
+    // A copy that ships only images_4/: its files are the views.
+    let only = dir.path().join("only4");
+    std::fs::create_dir_all(&only).unwrap();
+    for f in ["images_4", "poses_bounds.npy", "hold=7"] {
+        let from = root.join(f);
+        if from.is_dir() {
+            std::fs::create_dir_all(only.join(f)).unwrap();
+            for e in std::fs::read_dir(&from).unwrap() {
+                let p = e.unwrap().path();
+                std::fs::copy(&p, only.join(f).join(p.file_name().unwrap())).unwrap();
+            }
+        } else {
+            std::fs::copy(&from, only.join(f)).unwrap();
+        }
+    }
+    let s = open_scene(&only, &opts).unwrap();
+    assert_eq!(s.views.len(), 9);
+    assert_eq!(s.views[2].image, only.join("images_4/002.png"));
+    assert_eq!(s.pose_source, PoseSource::Llff);
+
     // The count is checked against the poses file.
     llff::write_poses_bounds(&root.join("poses_bounds.npy"), &rows(8, 32, 24)).unwrap();
     let e = open_scene(root, &opts).unwrap_err().to_string();

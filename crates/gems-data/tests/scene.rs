@@ -547,6 +547,29 @@ fn nerfstudio_opengl_convention() {
     write_img(&dir.path().join("train/r_0.png"), 10, 10, 0);
     let s = open_scene(dir.path(), &OpenOptions::default()).unwrap();
     assert!((s.views[0].intrinsics.unwrap().fx - 5.0).abs() < 1e-12);
+    // Downscaled: into the cache when the scene has no train_2/ …
+    let before = snapshot(dir.path());
+    let cache = tempfile::tempdir().unwrap();
+    let opts = OpenOptions {
+        downscale: 2,
+        cache_dir: Some(cache.path().to_path_buf()),
+        ..OpenOptions::default()
+    };
+    let s = open_scene(dir.path(), &opts).unwrap();
+    assert_eq!(snapshot(dir.path()), before);
+    assert!(
+        s.views[0].image.starts_with(cache.path()),
+        "{:?}",
+        s.views[0].image
+    );
+    assert_eq!((s.views[0].width, s.views[0].height), (5, 5));
+    // … and its own train_2/ (matched by stem) when it has one.
+    gems_data::image::save_image_auto(&dir.path().join("train_2/r_0.jpg"), &ImageRgb::new(5, 5))
+        .unwrap();
+    let s = open_scene(dir.path(), &opts).unwrap();
+    assert_eq!(s.views[0].image, dir.path().join("train_2/r_0.jpg"));
+    assert_eq!(s.views[0].name, "r_0.png");
+    assert!((s.views[0].intrinsics.unwrap().fx - 2.5).abs() < 1e-12);
 }
 
 #[test]
