@@ -2,8 +2,9 @@
 
 use gems_math::{Alignment, Se3, ape_translation};
 use gems_metrics::Lpips;
-use gems_splat::{Gaussians, RenderSettings, Renderer};
+use gems_splat::{Gaussians, RenderSettings};
 use gems_train::blur::{Intrinsics, camera_from_c2w};
+use gems_train::engine::Engine;
 use serde::{Deserialize, Serialize};
 
 use crate::EvalError;
@@ -146,7 +147,7 @@ pub struct SplitResult {
 
 /// Renders every view (black background, Gaussians frozen) and scores it.
 pub fn evaluate_views(
-    renderer: &mut Renderer,
+    renderer: &mut Engine,
     gaussians: &Gaussians,
     views: &[EvalView],
     mode: PoseMode,
@@ -157,7 +158,7 @@ pub fn evaluate_views(
 
 /// [`evaluate_views`], calling `on_view` with each view's name after it is scored.
 pub fn evaluate_views_with_progress(
-    renderer: &mut Renderer,
+    renderer: &mut Engine,
     gaussians: &Gaussians,
     views: &[EvalView],
     mode: PoseMode,

@@ -43,8 +43,8 @@ pub use refine::{PoseRefineConfig, Refined, refine_pose};
 pub use report::{GridRow, ReportInput, write_report};
 pub use trainer_eval::{
     EvalData, Evaluation, HeldOutView, attach_edi_images, eval_data_from_scene, evaluate_output,
-    evaluate_output_with_progress, evaluation_units, open_scene_for, report_input, write_renders,
-    write_trajectories,
+    evaluate_output_on, evaluate_output_with_progress, evaluation_units, open_scene_for,
+    report_input, write_renders, write_renders_on, write_trajectories,
 };
 
 /// Errors of evaluation and export. Every file error names the file.
@@ -71,6 +71,8 @@ pub enum EvalError {
     Lpips(#[from] gems_metrics::LpipsError),
     #[error(transparent)]
     Math(#[from] gems_math::MathError),
+    #[error(transparent)]
+    Train(#[from] gems_train::TrainError),
 }
 
 /// Writes `metrics.json` atomically (pretty-printed).

@@ -9,8 +9,9 @@
 //! logging interval that we do not copy).
 
 use gems_math::{Se3, Vector6, c2w_right_perturbation_gradient, se3_right_jacobian};
-use gems_splat::{Gaussians, RenderSettings, Renderer};
+use gems_splat::{Gaussians, RenderSettings};
 use gems_train::blur::{Intrinsics, camera_from_c2w};
+use gems_train::engine::Engine;
 
 use crate::EvalError;
 
@@ -69,7 +70,7 @@ fn clamped_l1(render: &[f32], gt: &[f32], d_rgb: &mut [f32]) -> f64 {
 
 /// The L1 loss at c2w_init · Exp(δ) and its gradient w.r.t. δ.
 pub fn pose_loss_and_grad(
-    renderer: &mut Renderer,
+    renderer: &mut Engine,
     gaussians: &Gaussians,
     c2w_init: &Se3,
     k: &Intrinsics,
@@ -105,7 +106,7 @@ pub fn pose_loss_and_grad(
 
 /// Fits the SE(3) correction of one view; see the module docs.
 pub fn refine_pose(
-    renderer: &mut Renderer,
+    renderer: &mut Engine,
     gaussians: &Gaussians,
     c2w_init: &Se3,
     k: &Intrinsics,
@@ -143,7 +144,7 @@ pub fn refine_pose(
 
 /// Renders `c2w` on a black background (the evaluation render).
 pub fn render(
-    renderer: &mut Renderer,
+    renderer: &mut Engine,
     gaussians: &Gaussians,
     c2w: &Se3,
     k: &Intrinsics,

@@ -6,8 +6,8 @@ use std::path::Path;
 use gems_data::{OpenOptions, Scene, Split, load_image, open_scene};
 use gems_math::Se3;
 use gems_metrics::Lpips;
-use gems_splat::Renderer;
 use gems_train::blur::Intrinsics;
+use gems_train::engine::Engine;
 use gems_train::io::TrainOutput;
 
 use crate::EvalError;
@@ -84,6 +84,18 @@ pub fn evaluate_output_with_progress(
     lpips: Option<&Lpips>,
     on_view: &mut dyn FnMut(&str),
 ) -> Result<Evaluation, EvalError> {
+    evaluate_output_on(&mut Engine::cpu(), output, data, refine, lpips, on_view)
+}
+
+/// [`evaluate_output_with_progress`] rendering with `engine` (`--device`).
+pub fn evaluate_output_on(
+    engine: &mut Engine,
+    output: &TrainOutput,
+    data: &EvalData,
+    refine: &PoseRefineConfig,
+    lpips: Option<&Lpips>,
+    on_view: &mut dyn FnMut(&str),
+) -> Result<Evaluation, EvalError> {
     if !data.train_gt.is_empty() && data.train_gt.len() != output.views.len() {
         return Err(EvalError::Input(format!(
             "{} training ground-truth entries for {} training views",
@@ -92,7 +104,6 @@ pub fn evaluate_output_with_progress(
         )));
     }
     let gaussians = &output.gaussians;
-    let mut renderer = Renderer::new();
     let mut deblur_views = Vec::new();
     let mut train_views = Vec::new();
     for (i, (view, gt)) in output.views.iter().zip(&data.train_gt).enumerate() {
@@ -119,7 +130,7 @@ pub fn evaluate_output_with_progress(
         })
         .collect();
     let mut run = |views: &[EvalView], mode| {
-        evaluate_views_with_progress(&mut renderer, gaussians, views, mode, lpips, on_view)
+        evaluate_views_with_progress(engine, gaussians, views, mode, lpips, on_view)
     };
     let deblur = run(&train_views, PoseMode::AsGiven)?;
     let nvs_no_pose_opt = run(&held, PoseMode::AsGiven)?;
@@ -474,6 +485,17 @@ pub fn write_renders(
     data: &EvalData,
     eval: &Evaluation,
 ) -> Result<(), EvalError> {
+    write_renders_on(&mut Engine::cpu(), dir, output, data, eval)
+}
+
+/// [`write_renders`] rendering with `engine` (`--device`).
+pub fn write_renders_on(
+    engine: &mut Engine,
+    dir: &Path,
+    output: &TrainOutput,
+    data: &EvalData,
+    eval: &Evaluation,
+) -> Result<(), EvalError> {
     let train_dir = dir.join("renders").join("train");
     let nvs_dir = dir.join("renders").join("nvs");
     for d in [&train_dir, &nvs_dir] {
@@ -490,7 +512,6 @@ pub fn write_renders(
         };
         gems_data::save_png(&path, &img).map_err(EvalError::from)
     };
-    let mut renderer = Renderer::new();
     let settings = gems_splat::RenderSettings::default();
     for v in &output.views {
         let k = &v.intrinsics;
@@ -501,7 +522,7 @@ pub fn write_renders(
             .map(|p| gems_train::blur::camera_from_c2w(&Se3::from(p), k))
             .collect();
         let n = v.virtual_c2w.len();
-        let out = renderer.forward(
+        let out = engine.forward(
             &output.gaussians,
             &cams,
             &vec![[0.0; 3]; cams.len()],

@@ -5,13 +5,13 @@ mod common;
 
 use gems_eval::refine::{pose_loss_and_grad, render};
 use gems_eval::{PoseRefineConfig, refine_pose};
-use gems_splat::Renderer;
+use gems_train::engine::Engine;
 
 #[test]
 fn pose_gradient_matches_finite_differences() {
     let g = common::scene(60, -2.6, 0.5);
     let k = common::intrinsics();
-    let mut r = Renderer::new();
+    let mut r = Engine::cpu();
     let gt = render(&mut r, &g, &common::camera(0.0), &k).unwrap();
     let start = common::perturb(
         &common::camera(0.0),
@@ -45,7 +45,7 @@ fn pose_gradient_matches_finite_differences() {
 fn refinement_recovers_a_perturbed_pose() {
     let g = common::scene(60, -2.6, 0.5);
     let k = common::intrinsics();
-    let mut r = Renderer::new();
+    let mut r = Engine::cpu();
     let truth = common::camera(0.3);
     let gt = render(&mut r, &g, &truth, &k).unwrap();
     let start = common::perturb(&truth, [0.03, -0.02, 0.02, 0.01, -0.012, 0.008]);

@@ -10,7 +10,9 @@
 //! factor), and each knot j receives Σ_k J_jkᵀ · g_k.
 
 use gems_math::{Se3, Trajectory, c2w_right_perturbation_gradient};
-use gems_splat::{Camera, Gaussians, Gradients, SplatError};
+use gems_splat::{Camera, Gaussians, Gradients};
+
+use crate::TrainError;
 
 /// Pinhole intrinsics of a training image.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -23,7 +25,7 @@ pub struct Intrinsics {
     pub height: u32,
 }
 
-/// A differentiable renderer of C cameras of one scene (the fast f32 engine, or the f64
+/// A differentiable renderer of C cameras of one scene (the CPU or GPU engine, or the f64
 /// reference in tests).
 pub trait Rasterizer {
     /// Renders `cams`; returns RGB `[C,H,W,3]`.
@@ -32,7 +34,7 @@ pub trait Rasterizer {
         g: &Gaussians,
         cams: &[Camera],
         bgs: &[[f32; 3]],
-    ) -> Result<Vec<f32>, SplatError>;
+    ) -> Result<Vec<f32>, TrainError>;
     /// Gradients of a loss with dL/dRGB = `d_rgb` for the last `render` of the same inputs.
     fn gradients(
         &mut self,
@@ -40,7 +42,7 @@ pub trait Rasterizer {
         cams: &[Camera],
         bgs: &[[f32; 3]],
         d_rgb: &[f32],
-    ) -> Result<Gradients, SplatError>;
+    ) -> Result<Gradients, TrainError>;
 }
 
 impl Rasterizer for gems_splat::Renderer {
@@ -49,7 +51,7 @@ impl Rasterizer for gems_splat::Renderer {
         g: &Gaussians,
         cams: &[Camera],
         bgs: &[[f32; 3]],
-    ) -> Result<Vec<f32>, SplatError> {
+    ) -> Result<Vec<f32>, TrainError> {
         Ok(self
             .forward(g, cams, bgs, &gems_splat::RenderSettings::default())?
             .rgb)
@@ -61,8 +63,58 @@ impl Rasterizer for gems_splat::Renderer {
         cams: &[Camera],
         bgs: &[[f32; 3]],
         d_rgb: &[f32],
-    ) -> Result<Gradients, SplatError> {
-        self.backward(g, cams, bgs, d_rgb, None)
+    ) -> Result<Gradients, TrainError> {
+        Ok(self.backward(g, cams, bgs, d_rgb, None)?)
+    }
+}
+
+impl Rasterizer for gems_gpu::GpuRenderer {
+    fn render(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        bgs: &[[f32; 3]],
+    ) -> Result<Vec<f32>, TrainError> {
+        Ok(self
+            .forward(g, cams, bgs, &gems_splat::RenderSettings::default())?
+            .rgb)
+    }
+
+    fn gradients(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        bgs: &[[f32; 3]],
+        d_rgb: &[f32],
+    ) -> Result<Gradients, TrainError> {
+        Ok(self.backward(g, cams, bgs, d_rgb, None)?)
+    }
+}
+
+impl Rasterizer for crate::engine::Engine {
+    fn render(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        bgs: &[[f32; 3]],
+    ) -> Result<Vec<f32>, TrainError> {
+        match self {
+            crate::engine::Engine::Cpu(r) => r.render(g, cams, bgs),
+            crate::engine::Engine::Gpu(r) => r.render(g, cams, bgs),
+        }
+    }
+
+    fn gradients(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        bgs: &[[f32; 3]],
+        d_rgb: &[f32],
+    ) -> Result<Gradients, TrainError> {
+        match self {
+            crate::engine::Engine::Cpu(r) => r.gradients(g, cams, bgs, d_rgb),
+            crate::engine::Engine::Gpu(r) => r.gradients(g, cams, bgs, d_rgb),
+        }
     }
 }
 
@@ -108,7 +160,7 @@ pub fn render_blurred<R: Rasterizer + ?Sized>(
     k: &Intrinsics,
     bg: [f32; 3],
     ws: &mut BlurWorkspace,
-) -> Result<(), SplatError> {
+) -> Result<(), TrainError> {
     ws.cams.clear();
     ws.cams.extend(
         times
@@ -142,7 +194,7 @@ pub fn backward_blurred<R: Rasterizer + ?Sized>(
     d_blurred: &[f32],
     ws: &mut BlurWorkspace,
     knot_grads: &mut [[f64; 6]],
-) -> Result<Gradients, SplatError> {
+) -> Result<Gradients, TrainError> {
     let inv_n = 1.0 / times.len() as f32;
     ws.d_rgb.clear();
     for _ in 0..times.len() {

@@ -8,6 +8,7 @@
 //! * [`normalize`] — PRISM3D scene normalisation (orient up, centre, scale) and its inverse.
 //! * [`blur`] — the blur model: n virtual cameras in one render call, mean, and the gradient
 //!   chain to Gaussians and trajectory knots.
+//! * [`engine`] — [`engine::Engine`]: the CPU or GPU splatting engine (`--device`).
 //! * [`trainer`] — [`trainer::Trainer`]: the joint optimisation loop and its checkpointable state.
 //! * [`io`] — atomic files, checkpoints (safetensors + JSON) and [`io::TrainOutput`], the
 //!   trained result that gems-eval consumes.
@@ -28,6 +29,7 @@
 pub mod adam;
 pub mod blur;
 pub mod config;
+pub mod engine;
 pub mod init;
 pub mod io;
 pub mod mcmc;
@@ -55,6 +57,8 @@ pub enum TrainError {
     Format { path: PathBuf, reason: String },
     #[error(transparent)]
     Splat(#[from] gems_splat::SplatError),
+    #[error(transparent)]
+    Gpu(#[from] gems_gpu::GpuError),
 }
 
 impl TrainError {

@@ -14,7 +14,7 @@ use std::time::Instant;
 
 use gems_math::{Se3, Trajectory};
 use gems_metrics::TrainingLoss;
-use gems_splat::{Gaussians, Gradients, Renderer};
+use gems_splat::{Gaussians, Gradients};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -24,6 +24,7 @@ use crate::TrainError;
 use crate::adam::{AdamHyper, AdamState};
 use crate::blur::{BlurWorkspace, Intrinsics, Rasterizer, backward_blurred, render_blurred};
 use crate::config::{TrainConfig, TrajectoryKind};
+use crate::engine::Engine;
 use crate::mcmc::{BinomialTable, GaussianAdam, add_new, inject_noise, relocate_dead};
 use crate::normalize::Normalization;
 
@@ -135,7 +136,7 @@ pub struct Trainer {
     pub scene_scale: f32,
     pub init_label: String,
     pub state: TrainState,
-    renderer: Renderer,
+    renderer: Engine,
     rng: ChaCha8Rng,
     losses: Vec<((u32, u32), TrainingLoss)>,
     ws: BlurWorkspace,
@@ -245,12 +246,23 @@ impl Trainer {
             scene_scale,
             init_label,
             state,
-            renderer: Renderer::new(),
+            renderer: Engine::cpu(),
             losses: Vec::new(),
             ws: BlurWorkspace::default(),
             d_blurred: Vec::new(),
             binoms: BinomialTable::default(),
         }
+    }
+
+    /// Renders with `engine` from now on (the CPU engine by default) and returns the previous
+    /// one. The engine is not part of the checkpointed state: a run may resume on another.
+    pub fn set_engine(&mut self, engine: Engine) -> Engine {
+        std::mem::replace(&mut self.renderer, engine)
+    }
+
+    /// The engine the trainer renders with.
+    pub fn engine(&self) -> &Engine {
+        &self.renderer
     }
 
     pub fn is_done(&self) -> bool {

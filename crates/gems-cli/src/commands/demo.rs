@@ -48,6 +48,11 @@ pub struct Args {
     /// Replace the output folder of an earlier demo.
     #[arg(long)]
     pub force: bool,
+    /// Where the splatting runs: `auto` takes a hardware GPU when there is one and the CPU
+    /// otherwise; `gpu` any GPU adapter (software ones such as Mesa lavapipe included), an error
+    /// when there is none; `cpu` the CPU.
+    #[arg(long, default_value = "auto")]
+    pub device: gems_gpu::DeviceChoice,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -141,6 +146,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         resume: false,
         evaluate: true,
         lpips: &[],
+        device: args.device,
     })?
     .context("evaluation produced no report")?;
     let metrics = gems_eval::read_metrics_json(&out.join("train").join("metrics.json"))?;

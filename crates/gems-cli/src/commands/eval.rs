@@ -38,6 +38,11 @@ pub struct Args {
     /// Rows of the blurry | ours | ground-truth grid in the report.
     #[arg(long, default_value_t = 4)]
     pub grid_rows: usize,
+    /// Where the splatting runs: `auto` takes a hardware GPU when there is one and the CPU
+    /// otherwise; `gpu` any GPU adapter (software ones such as Mesa lavapipe included), an error
+    /// when there is none; `cpu` the CPU.
+    #[arg(long, default_value = "auto")]
+    pub device: gems_gpu::DeviceChoice,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -80,7 +85,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.set_style(indicatif::ProgressStyle::with_template(
         "eval [{bar:30}] {pos}/{len} views  {msg}  ({elapsed}, ETA {eta})",
     )?);
-    let eval = gems_eval::evaluate_output_with_progress(
+    let mut engine = super::pipeline::open_engine(args.device)?;
+    let eval = gems_eval::evaluate_output_on(
+        &mut engine,
         &output,
         &data,
         &refine,
@@ -93,7 +100,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     write_metrics_json(&args.output.join("metrics.json"), &eval.metrics)?;
     write_trajectories(&args.output, &output)?;
-    gems_eval::write_renders(&args.output, &output, &data, &eval)?;
+    gems_eval::write_renders_on(&mut engine, &args.output, &output, &data, &eval)?;
     let report = write_report(
         &args.output,
         &gems_eval::report_input(&output, &data, &eval, args.grid_rows),

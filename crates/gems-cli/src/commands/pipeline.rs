@@ -4,7 +4,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
+use gems_gpu::DeviceChoice;
 use gems_train::TrainConfig;
+use gems_train::engine::Engine;
 use gems_train::io::{TrainOutput, has_checkpoint, load_checkpoint, save_checkpoint};
 use gems_train::prepare::{InitMode, prepare_input};
 use gems_train::trainer::Trainer;
@@ -21,6 +23,15 @@ pub struct TrainJob<'a> {
     pub resume: bool,
     pub evaluate: bool,
     pub lpips: &'a [PathBuf],
+    pub device: DeviceChoice,
+}
+
+/// The splatting engine for `--device`, announced on stdout; `--device gpu` without an
+/// adapter is an error.
+pub fn open_engine(device: DeviceChoice) -> anyhow::Result<Engine> {
+    let engine = Engine::select(device).context("--device")?;
+    println!("device: {}", engine.describe());
+    Ok(engine)
 }
 
 /// Trains, writes `point_cloud.ply` (input frame), the model, and — unless disabled — metrics,
@@ -39,6 +50,7 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
         InitMode::Gt | InitMode::GtNoisy { .. } => None,
     };
 
+    let engine = open_engine(job.device)?;
     let mut trainer = if job.resume && has_checkpoint(job.output) {
         let (ckpt_cfg, state) = load_checkpoint(job.output)?;
         let input = prepare_input(&scene, &job.mode, &ckpt_cfg)?;
@@ -62,6 +74,7 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
         tracing::info!(views = input.views.len(), gaussians = input.gaussians.len(), init = %input.init_label, "training");
         Trainer::new(job.cfg, input)?
     };
+    trainer.set_engine(engine);
     gems_train::io::write_atomic(
         &job.output.join("config.toml"),
         trainer.cfg.to_toml().as_bytes(),
@@ -123,7 +136,9 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
         ProgressStyle::with_template("evaluating {bar:30} {pos}/{len} views  ETA {eta}")
             .expect("static progress template"),
     );
-    let eval = gems_eval::evaluate_output_with_progress(
+    let mut engine = trainer.set_engine(Engine::cpu());
+    let eval = gems_eval::evaluate_output_on(
+        &mut engine,
         &output,
         &data,
         &gems_eval::PoseRefineConfig::default(),
@@ -133,7 +148,7 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
     bar.finish();
     gems_eval::write_metrics_json(&job.output.join("metrics.json"), &eval.metrics)?;
     gems_eval::write_trajectories(job.output, &output)?;
-    gems_eval::write_renders(job.output, &output, &data, &eval)?;
+    gems_eval::write_renders_on(&mut engine, job.output, &output, &data, &eval)?;
     let report = gems_eval::write_report(
         job.output,
         &gems_eval::report_input(&output, &data, &eval, 4),

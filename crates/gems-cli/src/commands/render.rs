@@ -9,7 +9,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use gems_splat::{Camera, RenderSettings, Renderer, ply, write_png};
+use gems_splat::{Camera, RenderSettings, ply, write_png};
 
 /// Arguments of `gems render`.
 #[derive(clap::Args)]
@@ -67,6 +67,11 @@ pub struct Args {
     /// Mip-Splatting antialiased rasterisation (for scenes trained that way).
     #[arg(long)]
     pub antialiased: bool,
+    /// Where the splatting runs: `auto` takes a hardware GPU when there is one and the CPU
+    /// otherwise; `gpu` any GPU adapter (software ones such as Mesa lavapipe included), an error
+    /// when there is none; `cpu` the CPU.
+    #[arg(long, default_value = "auto")]
+    pub device: gems_gpu::DeviceChoice,
 }
 
 fn parse_floats<const K: usize>(s: &str) -> Result<[f32; K], String> {
@@ -205,7 +210,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         antialiased: args.antialiased,
         ..Default::default()
     };
-    let mut renderer = Renderer::new();
+    let mut renderer = super::pipeline::open_engine(args.device)?;
     let out = renderer.forward(&g, &[cam], &[args.background], &settings)?;
     write_png(&args.output, &out, 0)?;
     let covered = out.alpha.iter().filter(|&&a| a > 0.5).count();

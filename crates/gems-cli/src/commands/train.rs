@@ -105,6 +105,11 @@ pub struct Args {
     /// LPIPS weights for the evaluation (see `gems eval --help`).
     #[arg(long, num_args = 1..)]
     pub lpips: Vec<PathBuf>,
+    /// Where the splatting runs: `auto` takes a hardware GPU when there is one and the CPU
+    /// otherwise; `gpu` any GPU adapter (software ones such as Mesa lavapipe included), an error
+    /// when there is none; `cpu` the CPU.
+    #[arg(long, default_value = "auto")]
+    pub device: gems_gpu::DeviceChoice,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -205,6 +210,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         resume: args.resume,
         evaluate: !args.no_eval,
         lpips: &args.lpips,
+        device: args.device,
     })?;
     if let Some(report) = report {
         println!("report: {}", report.display());

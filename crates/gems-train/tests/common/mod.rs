@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use gems_math::{Se3, Vector3, Vector6};
-use gems_splat::{Camera, Gaussians, Gradients, RenderSettings, SplatError, reference};
+use gems_splat::{Camera, Gaussians, Gradients, RenderSettings, reference};
 use gems_train::blur::{Intrinsics, Rasterizer};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -69,7 +69,7 @@ impl Rasterizer for Reference {
         g: &Gaussians,
         cams: &[Camera],
         bgs: &[[f32; 3]],
-    ) -> Result<Vec<f32>, SplatError> {
+    ) -> Result<Vec<f32>, gems_train::TrainError> {
         Ok(reference::forward(g, cams, bgs, &self.0)?
             .rgb
             .iter()
@@ -83,7 +83,7 @@ impl Rasterizer for Reference {
         cams: &[Camera],
         bgs: &[[f32; 3]],
         d_rgb: &[f32],
-    ) -> Result<Gradients, SplatError> {
+    ) -> Result<Gradients, gems_train::TrainError> {
         let d: Vec<f64> = d_rgb.iter().map(|&v| v as f64).collect();
         let r = reference::backward(g, cams, bgs, &self.0, &d, None)?;
         let f3 = |v: &[f64; 3]| v.map(|x| x as f32);

@@ -1,0 +1,83 @@
+//! [`Engine`]: the splatting engine a run uses, the CPU one (`gems_splat::Renderer`) or the GPU
+//! one (`gems_gpu::GpuRenderer`), chosen with `--device`.
+//!
+//! Both implement the same contract and are tested against each other (gems-gpu's parity
+//! tests), so a run may switch engines between a checkpoint and its `--resume`. Results of the
+//! two engines differ by float rounding only; each engine alone is deterministic (the GPU one
+//! on a given adapter and driver: it adds no floats atomically).
+
+use gems_gpu::{DeviceChoice, GpuRenderer};
+use gems_splat::{Camera, Gaussians, Gradients, RenderOutput, RenderSettings, Renderer};
+
+use crate::TrainError;
+
+/// A splatting engine.
+pub enum Engine {
+    Cpu(Renderer),
+    Gpu(Box<GpuRenderer>),
+}
+
+impl Default for Engine {
+    fn default() -> Self {
+        Engine::cpu()
+    }
+}
+
+impl std::fmt::Debug for Engine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Engine({})", self.describe())
+    }
+}
+
+impl Engine {
+    /// The CPU engine.
+    pub fn cpu() -> Self {
+        Engine::Cpu(Renderer::new())
+    }
+
+    /// The engine for `--device`: `auto` takes a hardware GPU when there is one and the CPU
+    /// otherwise; `gpu` with no adapter is an error.
+    pub fn select(choice: DeviceChoice) -> Result<Self, TrainError> {
+        Ok(match gems_gpu::select(choice)? {
+            Some(ctx) => Engine::Gpu(Box::new(GpuRenderer::new(&ctx))),
+            None => Engine::cpu(),
+        })
+    }
+
+    /// What runs the renders, for the user: "CPU" or the GPU adapter.
+    pub fn describe(&self) -> String {
+        match self {
+            Engine::Cpu(_) => format!("CPU ({} threads)", rayon::current_num_threads()),
+            Engine::Gpu(r) => format!("GPU {}", r.adapter()),
+        }
+    }
+
+    /// Renders C cameras of one scene (see `gems_splat::Renderer::forward`).
+    pub fn forward(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        bgs: &[[f32; 3]],
+        s: &RenderSettings,
+    ) -> Result<RenderOutput, TrainError> {
+        Ok(match self {
+            Engine::Cpu(r) => r.forward(g, cams, bgs, s)?,
+            Engine::Gpu(r) => r.forward(g, cams, bgs, s)?,
+        })
+    }
+
+    /// Backward of the last [`Engine::forward`] (see `gems_splat::Renderer::backward`).
+    pub fn backward(
+        &mut self,
+        g: &Gaussians,
+        cams: &[Camera],
+        bgs: &[[f32; 3]],
+        d_rgb: &[f32],
+        d_alpha: Option<&[f32]>,
+    ) -> Result<Gradients, TrainError> {
+        Ok(match self {
+            Engine::Cpu(r) => r.backward(g, cams, bgs, d_rgb, d_alpha)?,
+            Engine::Gpu(r) => r.backward(g, cams, bgs, d_rgb, d_alpha)?,
+        })
+    }
+}
