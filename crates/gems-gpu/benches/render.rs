@@ -6,7 +6,6 @@
 //! adapter is printed first; figures in BENCHMARKS.md.
 
 #[path = "../../gems-splat/tests/common/mod.rs"]
-#[allow(dead_code)]
 mod common;
 
 use divan::Bencher;

@@ -11,9 +11,9 @@ use gems_splat::{Camera, Gaussians, Gradients, RenderOutput, RenderSettings, Ren
 
 use crate::TrainError;
 
-/// A splatting engine.
+/// A splatting engine (both boxed: the CPU engine's buffers are kept inline).
 pub enum Engine {
-    Cpu(Renderer),
+    Cpu(Box<Renderer>),
     Gpu(Box<GpuRenderer>),
 }
 
@@ -32,7 +32,7 @@ impl std::fmt::Debug for Engine {
 impl Engine {
     /// The CPU engine.
     pub fn cpu() -> Self {
-        Engine::Cpu(Renderer::new())
+        Engine::Cpu(Box::new(Renderer::new()))
     }
 
     /// The engine for `--device`: `auto` takes a hardware GPU when there is one and the CPU

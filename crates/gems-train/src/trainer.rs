@@ -508,7 +508,7 @@ impl Trainer {
         let mut g = self.state.gaussians.clone();
         g.sh_degree = self.cfg.sh_degree;
         let cam = crate::blur::camera_from_c2w(c2w, k);
-        Ok(self.renderer.render(&g, &[cam], &[[0.0; 3]])?)
+        self.renderer.render(&g, &[cam], &[[0.0; 3]])
     }
 }
 
