@@ -16,7 +16,8 @@
 //! - [`report`]: `report.html` with loss/PSNR curves, a trajectory plot and a
 //!   blurry | ours | ground-truth grid, with an EDI column between blurry and ours when the run
 //!   used events ([`attach_edi_images`]), and per-row PSNRs (PNG via plotters, no text in the
-//!   images); its inputs come from [`report_input`].
+//!   images) and the interactive WebGL2 view of [`viewer`] (also written alone as `viewer.html`);
+//!   its inputs come from [`report_input`].
 //!
 //! Typical use after training (what `gems train` and `gems eval` do):
 //! ```text
@@ -32,6 +33,7 @@ pub mod refine;
 pub mod report;
 pub mod trainer_eval;
 pub mod tum;
+pub mod viewer;
 
 use std::path::{Path, PathBuf};
 

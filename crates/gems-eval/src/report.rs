@@ -38,6 +38,8 @@ pub struct ReportInput {
     /// Per view: the ground-truth mid-exposure centre when known (input frame).
     pub gt_centres: Vec<Option<[f64; 3]>>,
     pub grid: Vec<GridRow>,
+    /// The interactive 3D view (also written alone as `viewer.html`), when there is a scene.
+    pub viewer: Option<crate::viewer::ViewerScene>,
 }
 
 const PLOT_W: u32 = 640;
@@ -407,6 +409,25 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
             );
         }
         html.push_str("</table>\n");
+    }
+    if let Some(scene) = &input.viewer {
+        for (rel, img) in &scene.image_files {
+            save_png(&dir.join(rel), img)?;
+        }
+        let (frag, _) = crate::viewer::viewer_fragment(scene, false);
+        html.push_str(
+            "<h2>Interactive view</h2>\n<p>The trained Gaussians (WebGL2). Camera buttons jump to \
+             each training view at its mid-exposure pose and each held-out view; at a view the \
+             image buttons toggle the blurry input and the ground truth over the live render. Red \
+             lines: estimated exposure trajectories. The same view fills the window in \
+             <a href=\"viewer.html\">viewer.html</a> (<code>viewer.html#camera=&lt;image name&gt;</code> \
+             opens at that camera).</p>\n",
+        );
+        html.push_str(&frag);
+        gems_data::write_atomic(
+            &dir.join("viewer.html"),
+            crate::viewer::viewer_page(scene, &input.title).as_bytes(),
+        )?;
     }
     html.push_str("</body></html>\n");
     let path = dir.join("report.html");

@@ -17,6 +17,7 @@ use crate::evaluate::{
 use crate::refine::PoseRefineConfig;
 use crate::report::{GridRow, ReportInput};
 use crate::tum::write_tum;
+use crate::viewer::{CameraKind, ViewerCamera, ViewerScene};
 
 /// A held-out (novel) view: never trained on; its pose is the initial one.
 #[derive(Clone, Debug)]
@@ -423,7 +424,75 @@ pub fn report_input(
             .map(|v| v.c2w_gt.as_ref().map(centre))
             .collect(),
         grid,
+        viewer: Some(viewer_scene(output, data)),
     }
+}
+
+/// The interactive view's scene, in the trained result's normalised frame (where its cameras
+/// live): the Gaussians, every training view at its mid-exposure pose with its exposure
+/// trajectory and its blurry input and ground truth (when loaded) as toggles, and every
+/// held-out view at its initial pose with its ground truth.
+pub fn viewer_scene(output: &TrainOutput, data: &EvalData) -> ViewerScene {
+    let mut scene = ViewerScene {
+        gaussians: output.gaussians.clone(),
+        ..Default::default()
+    };
+    let mut image = |stem: &str, label: &str, k: &Intrinsics, img: Option<&Vec<f32>>| {
+        let img = img?;
+        let rel = format!("report/viewer/{stem}_{}.png", label.replace(' ', "_"));
+        scene.image_files.push((
+            rel.clone(),
+            gems_data::ImageRgb {
+                width: k.width,
+                height: k.height,
+                data: img.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+            },
+        ));
+        Some((label.to_string(), rel))
+    };
+    let mut cameras = Vec::new();
+    for (i, v) in output.views.iter().enumerate() {
+        let k = &v.intrinsics;
+        let stem = format!("train_{}", file_stem(&v.name));
+        let images = [
+            image(
+                &stem,
+                "blurry input",
+                k,
+                data.train_blurry.get(i).and_then(Option::as_ref),
+            ),
+            image(
+                &stem,
+                "ground truth",
+                k,
+                data.train_gt.get(i).and_then(Option::as_ref),
+            ),
+        ];
+        cameras.push(ViewerCamera {
+            name: v.name.clone(),
+            kind: CameraKind::Train,
+            camera: gems_train::blur::camera_from_c2w(&se3(&v.mid_c2w), k),
+            trajectory: v
+                .virtual_c2w
+                .iter()
+                .map(|p| se3(p).trans.map(|x| x as f32).into())
+                .collect(),
+            images: images.into_iter().flatten().collect(),
+        });
+    }
+    for h in &data.held_out {
+        let stem = format!("held_out_{}", file_stem(&h.name));
+        let images = image(&stem, "ground truth", &h.intrinsics, Some(&h.gt));
+        cameras.push(ViewerCamera {
+            name: h.name.clone(),
+            kind: CameraKind::HeldOut,
+            camera: gems_train::blur::camera_from_c2w(&h.c2w_init, &h.intrinsics),
+            trajectory: Vec::new(),
+            images: images.into_iter().collect(),
+        });
+    }
+    scene.cameras = cameras;
+    scene
 }
 
 /// Opens the scene a result was trained on at the training resolution: the downscale factor is

@@ -202,6 +202,7 @@ fn report_writes_html_and_figures() {
             ours: img(0.5),
             gt: Some(img(0.9)),
         }],
+        viewer: None,
     };
     let html_path = write_report(dir.path(), &input).unwrap();
     let html = std::fs::read_to_string(&html_path).unwrap();
