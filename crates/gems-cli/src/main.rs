@@ -36,6 +36,8 @@ enum Command {
     Train(commands::train::Args),
     /// Re-run evaluation on a trained output folder.
     Eval(commands::eval::Args),
+    /// Export a trained result's Gaussians as PLY or web `.splat` for other viewers.
+    Export(commands::export::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -58,6 +60,7 @@ fn main() -> std::process::ExitCode {
         Command::Sfm(a) => commands::sfm::run(a),
         Command::Train(a) => commands::train::run(a),
         Command::Eval(a) => commands::eval::run(a),
+        Command::Export(a) => commands::export::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

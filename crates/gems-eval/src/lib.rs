@@ -28,6 +28,7 @@
 //! gems_eval::write_report(&dir, &gems_eval::report_input(&output, &data, &eval, 4))?;
 //! ```
 
+pub mod browser;
 pub mod evaluate;
 pub mod refine;
 pub mod report;

@@ -5,61 +5,22 @@
 //! Needs Debian's `chromium` (or `GEMS_CHROMIUM=<binary>`); without it the test fails.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use gems_eval::viewer::{CameraKind, ViewerCamera, ViewerScene, viewer_page};
 use gems_splat::{Camera, Gaussians, RenderSettings, Renderer};
 
-fn chromium() -> PathBuf {
-    if let Some(p) = std::env::var_os("GEMS_CHROMIUM") {
-        return PathBuf::from(p);
-    }
-    for p in [
-        "/usr/bin/chromium",
-        "/usr/bin/chromium-browser",
-        "/usr/bin/google-chrome",
-    ] {
-        if Path::new(p).is_file() {
-            return PathBuf::from(p);
-        }
-    }
-    panic!(
+/// Screenshot of `viewer.html#camera=<name>` in a `w`×`h` window; fails without Chromium.
+fn screenshot(page: &Path, name: &str, w: u32, h: u32, dir: &Path) -> gems_data::ImageRgb {
+    use gems_eval::browser;
+    assert!(
+        browser::find_chromium().is_some(),
         "headless Chromium is needed for the viewer test: install Debian's `chromium` package \
          (apt-get install chromium) or set GEMS_CHROMIUM to a Chromium/Chrome binary"
     );
-}
-
-/// Screenshot of `url` in a `w`×`h` window.
-fn screenshot(page: &Path, fragment: &str, w: u32, h: u32, tmp: &Path) -> gems_data::ImageRgb {
-    let png = tmp.join(format!("shot_{fragment}.png"));
-    let profile = tmp.join(format!("profile_{fragment}"));
-    let url = format!("file://{}#camera={fragment}", page.display());
-    let out = Command::new(chromium())
-        .args([
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--use-angle=swiftshader",
-            "--enable-unsafe-swiftshader",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--no-first-run",
-            "--hide-scrollbars",
-            "--force-device-scale-factor=1",
-        ])
-        .arg(format!("--user-data-dir={}", profile.display()))
-        .arg(format!("--window-size={w},{h}"))
-        .arg(format!("--screenshot={}", png.display()))
-        .arg(url)
-        .output()
-        .expect("running chromium");
-    assert!(
-        out.status.success() && png.is_file(),
-        "chromium failed: {}\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let png = dir.join(format!("shot_{name}.png"));
+    let url =
+        browser::file_url(page, &format!("camera={}", browser::encode_component(name))).unwrap();
+    browser::screenshot(&url, w, h, &png, dir).unwrap();
     let img = gems_data::load_image(&png).expect("reading the screenshot");
     assert_eq!((img.width, img.height), (w, h), "screenshot size");
     img

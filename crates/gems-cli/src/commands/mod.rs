@@ -3,6 +3,7 @@ pub mod demo;
 pub mod edi;
 pub mod eval;
 pub mod events;
+pub mod export;
 pub mod info;
 pub mod pipeline;
 pub mod render;
