@@ -108,7 +108,7 @@ fn trained_scene_viewer_and_exports() {
         &s(&dir.join("g.ply")),
     ]);
     assert_eq!(
-        gems_splat::ply::read_ply(&dir.join("g.ply")).unwrap().len(),
+        gems_splat::ply::read_ply(dir.join("g.ply")).unwrap().len(),
         n
     );
     gems(&[

@@ -60,11 +60,9 @@ fn scene() -> Gaussians {
             -3.5 + rng.next(),
         ];
         let mut sh = [[0.0f32; 3]; 16];
-        for c in 0..3 {
-            sh[0][c] = (rng.next() - 0.5) * 3.0;
-            for k in 1..4 {
-                sh[k][c] = (rng.next() - 0.5) * 0.6;
-            }
+        sh[0] = [0; 3].map(|_: i32| (rng.next() - 0.5) * 3.0);
+        for coeffs in &mut sh[1..4] {
+            *coeffs = [0; 3].map(|_: i32| (rng.next() - 0.5) * 0.6);
         }
         g.push(mean, quat, log_scale, (rng.next() - 0.3) * 6.0, sh);
     }
