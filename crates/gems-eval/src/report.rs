@@ -319,6 +319,25 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
         m.seconds,
         m.gaussians
     );
+    if let Some(scene) = &input.viewer {
+        for (rel, img) in &scene.image_files {
+            save_png(&dir.join(rel), img)?;
+        }
+        let (frag, _) = crate::viewer::viewer_fragment(scene, false);
+        html.push_str(
+            "<h2>Interactive view</h2>\n<p>The trained Gaussians (WebGL2). Camera buttons jump to \
+             each training view at its mid-exposure pose and each held-out view; at a view the \
+             image buttons toggle the blurry input and the ground truth over the live render. Red \
+             lines: estimated exposure trajectories. The same view fills the window in \
+             <a href=\"viewer.html\">viewer.html</a> (<code>viewer.html#camera=&lt;image name&gt;</code> \
+             opens at that camera).</p>\n",
+        );
+        html.push_str(&frag);
+        gems_data::write_atomic(
+            &dir.join("viewer.html"),
+            crate::viewer::viewer_page(scene, &input.title).as_bytes(),
+        )?;
+    }
     if [&m.deblur, &m.nvs, &m.nvs_no_pose_opt]
         .iter()
         .any(|s| s.as_ref().is_some_and(|s| s.lpips.is_none()))
@@ -409,25 +428,6 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
             );
         }
         html.push_str("</table>\n");
-    }
-    if let Some(scene) = &input.viewer {
-        for (rel, img) in &scene.image_files {
-            save_png(&dir.join(rel), img)?;
-        }
-        let (frag, _) = crate::viewer::viewer_fragment(scene, false);
-        html.push_str(
-            "<h2>Interactive view</h2>\n<p>The trained Gaussians (WebGL2). Camera buttons jump to \
-             each training view at its mid-exposure pose and each held-out view; at a view the \
-             image buttons toggle the blurry input and the ground truth over the live render. Red \
-             lines: estimated exposure trajectories. The same view fills the window in \
-             <a href=\"viewer.html\">viewer.html</a> (<code>viewer.html#camera=&lt;image name&gt;</code> \
-             opens at that camera).</p>\n",
-        );
-        html.push_str(&frag);
-        gems_data::write_atomic(
-            &dir.join("viewer.html"),
-            crate::viewer::viewer_page(scene, &input.title).as_bytes(),
-        )?;
     }
     html.push_str("</body></html>\n");
     let path = dir.join("report.html");
