@@ -37,7 +37,7 @@ fn trained_scene_viewer_and_exports() {
     let scene = dir.join("scene");
     let out = dir.join("run");
     let s = |p: &Path| p.to_str().unwrap().to_string();
-    gems(&["synth", "--preset", "tiny", &s(&scene)]);
+    gems(&["synth", "--preset", "tiny", "-o", &s(&scene)]);
     gems(&[
         "train",
         &s(&scene),
