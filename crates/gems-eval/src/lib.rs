@@ -1,4 +1,5 @@
-//! Evaluation and export for gems (deblur.md §5.3, the protocol behind the GeMS numbers).
+//! Evaluation and export for gems (the protocol behind the GeMS numbers, as in
+//! `GopiRajuMatta/PRISM3D:prism3d_trainer.py` `eval_with_pose_opt` and `train.sh`).
 //!
 //! - [`evaluate_views`]: render views with frozen Gaussians, either at a given pose or after
 //!   test-time pose refinement ([`refine::refine_pose`]: one SE(3) correction per view, 100 Adam

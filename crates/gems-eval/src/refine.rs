@@ -1,4 +1,5 @@
-//! Test-time pose refinement (the GeMS/PRISM3D evaluation protocol, deblur.md §5.3): the
+//! Test-time pose refinement (the GeMS/PRISM3D evaluation protocol,
+//! `GopiRajuMatta/PRISM3D:prism3d_trainer.py` `eval_with_pose_opt`): the
 //! Gaussians stay frozen and one SE(3) correction δ per view, right-composed on the initial pose
 //! (c2w = c2w_init · Exp(δ)), is fitted by Adam (lr 1e-3, eps 1e-15, 100 steps) to the L1 error
 //! between the clamped render and the sharp ground truth.

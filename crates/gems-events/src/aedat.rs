@@ -1,6 +1,6 @@
 //! AEDAT 4 (iniVation DV) reader: polarity events and APS frames with their exposure times.
 //!
-//! Layout (events.md §3.4): ASCII `#!AER-DAT4.0\r\n`, u32 length + `IOHE` flatbuffer {compression,
+//! Layout (the `aedat` crate's flatbuffer schemas, `neuromorphicsystems/aedat`): ASCII `#!AER-DAT4.0\r\n`, u32 length + `IOHE` flatbuffer {compression,
 //! file_data_position, description XML}, then packets `u32 stream id, u32 byte length, payload`;
 //! each payload (LZ4 frame or Zstd, as the header declares) is a size-prefixed flatbuffer: `EVTS`
 //! {elements: [struct Event {t i64 µs, x i16, y i16, on bool}] (16 bytes each)} or `FRME` {t,

@@ -1,6 +1,7 @@
 //! HDF5 event files (cargo feature `hdf5`, needs the system HDF5 library).
 //!
-//! Layouts found in the wild (see the events reference notes §3.2):
+//! Layouts found in the wild (per the loaders of `uzh-rpg/EvDeblurNeRF`, `uzh-rpg/DSEC`,
+//! `WU-CVGL/BeNeRF` and `SensorsINI/v2e`):
 //! - one 1-D dataset per column at the root (EvDeblurNeRF, LSENeRF: `x`, `y`, `t`, `p`) or in one
 //!   group (DSEC, TUM-VIE: `/events/{x,y,t,p}`), with aliases `xs`/`ys`/`ts`/`ps`,
 //!   `timestamp(s)`, `polarity`/`polarities`;

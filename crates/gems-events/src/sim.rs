@@ -1,4 +1,5 @@
-//! ESIM-style event simulation from timestamped frames (events.md §2.1).
+//! ESIM-style event simulation from timestamped frames (ESIM, Rebecq et al. 2018;
+//! `uzh-rpg/rpg_esim:event_camera_simulator/esim/src/event_simulator.cpp`).
 //!
 //! Per pixel the simulator tracks the log luminance `log(Y + ε)` of the last frame and a reference
 //! level (the last threshold crossing, initialised from the first frame). Between two frames the log

@@ -1,4 +1,4 @@
-//! Simulator behaviour (ESIM semantics, events.md §2.1).
+//! Simulator behaviour (ESIM semantics, `uzh-rpg/rpg_esim:event_camera_simulator/esim/src/event_simulator.cpp`).
 
 use gems_events::{SimConfig, Simulator};
 

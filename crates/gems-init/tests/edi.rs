@@ -467,7 +467,7 @@ fn threshold_search_estimates_on_and_off_thresholds_apart() {
 
 #[test]
 fn published_energy_prefers_the_smallest_threshold() {
-    // The TV + event-edge energy (events.md §1.4) on the same data: TV cannot tell residual
+    // The TV + event-edge energy (Pan et al., CVPR 2019) on the same data: TV cannot tell residual
     // blur (a ramp) from a step, so the search runs to the lower end — why it is not the default.
     let search = SearchConfig {
         energy: SearchEnergy::TvEdges { tv_weight: 0.15 },

@@ -1,7 +1,7 @@
 //! Training configuration: every constant of the method is a field, loadable from TOML.
 //!
 //! Defaults follow the GeMS paper where it states a value and the authors' trainer (PRISM3D)
-//! where it is silent (see `shared/reference/deblur.md` §5.2). PRISM3D nominally schedules over
+//! where it is silent (`GopiRajuMatta/PRISM3D:prism3d_trainer.py` `DeblurConfig` and `train.sh`). PRISM3D nominally schedules over
 //! 30 000 steps but stops at 7 000; our schedules are defined over the *run length* instead, and
 //! the defaults are chosen so that a 7 000-step run reproduces PRISM3D's effective behaviour
 //! (means lr ends at 0.01^(7/30) ≈ 0.341× its start, pose lr at 1e-3^(7/30) ≈ 0.200×).

@@ -1,4 +1,5 @@
-//! 3DGS-MCMC densification with gsplat's `MCMCStrategy` semantics (splatting.md §1.8).
+//! 3DGS-MCMC densification with gsplat's `MCMCStrategy` semantics
+//! (`nerfstudio-project/gsplat:gsplat/strategy/mcmc.py`, `ops.py`, `relocation.py`).
 //!
 //! * Relocation: Gaussians with opacity ≤ `min_opacity` are dead. As many sources are drawn from
 //!   the alive ones by multinomial sampling ∝ opacity **with replacement**; a source drawn c times

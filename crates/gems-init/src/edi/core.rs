@@ -135,7 +135,8 @@ impl PixelEvents {
         (&self.t[a..b], &self.p[a..b])
     }
     /// Signed polarity sum per pixel with events before `f` counted negatively — the event edge
-    /// map M of the threshold search (events.md §1.4).
+    /// map M of the threshold search (Pan et al., CVPR 2019;
+    /// `ac-freeman/davis-EDI-rs:src/util/reconstructor.rs`).
     pub fn signed_map(&self, f: i64) -> Vec<f32> {
         (0..self.width * self.height)
             .map(|k| {

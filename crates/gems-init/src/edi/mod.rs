@@ -1,4 +1,4 @@
-//! Event-based double-integral (EDI) deblurring (Pan et al. 2019; events.md §1): sharp latent
+//! Event-based double-integral (EDI) deblurring (Pan et al., CVPR 2019): sharp latent
 //! frames from a blurry image and the events fired during its exposure. GeMS-E uses these images
 //! only to initialise (SfM poses and points); training still sees the blurry images.
 //!

@@ -15,8 +15,9 @@
 //! residual blur and by overshoot ghosts alike, while a total variation cannot tell a ramp from
 //! a step.
 //!
-//! **Published energy, [`SearchEnergy::TvEdges`]** (EDI authors, davis-EDI-rs, ev-thresh-est;
-//! events.md §1.4): `λ·Σ|∇L| − Σ edge(L)·edge(M)` with Sobel magnitudes, edge(·) binarised at
+//! **Published energy, [`SearchEnergy::TvEdges`]** (EDI authors, davis-EDI-rs, ev-thresh-est:
+//! `panpanfei/Bringing-a-Blurry-Frame-Alive-at-High-Frame-Rate-with-an-Event-Camera:EDI/TVnorm.m`,
+//! `ac-freeman/davis-EDI-rs:src/util/reconstructor.rs`, `Goulustis/ev-thresh-est:thresh_est.py`): `λ·Σ|∇L| − Σ edge(L)·edge(M)` with Sobel magnitudes, edge(·) binarised at
 //! `m + (1 − m)/3` of the min-max normalised magnitude, M the signed event map. Kept for
 //! comparison: on our synthetic data it decreases monotonically towards small c (TV does not see
 //! residual blur), so the search returns the lower end of the range.
