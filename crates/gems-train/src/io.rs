@@ -400,7 +400,7 @@ impl TrainOutput {
     pub fn trajectory(&self, v: usize) -> Trajectory {
         let kind = math_kind(self.config.trajectory);
         Trajectory::new(kind, self.views[v].knots.clone())
-            .expect("saved knot count matches the kind")
+            .expect("knot count matches the kind: built by the trainer or checked by `load`")
     }
 
     /// Writes `model.safetensors` + `model.json` into `dir` (atomically).
@@ -437,6 +437,20 @@ impl TrainOutput {
         let jpath = dir.join(MODEL_JSON);
         let meta: OutputMeta =
             serde_json::from_slice(&read(&jpath)?).map_err(|e| format_err(&jpath, e))?;
+        // `trajectory()` builds each view's trajectory from these knots; a hand-edited or
+        // mismatched `model.json` must fail here, with the file named, not panic there.
+        let needed = meta.config.num_knots();
+        if let Some(v) = meta.views.iter().find(|v| v.knots.len() != needed) {
+            return Err(format_err(
+                &jpath,
+                format!(
+                    "view {:?} has {} trajectory knots, but the {:?} trajectory of its config needs {needed}",
+                    v.name,
+                    v.knots.len(),
+                    meta.config.trajectory,
+                ),
+            ));
+        }
         let tpath = dir.join(MODEL_TENSORS);
         let bytes = read(&tpath)?;
         let r = TensorReader::new(&bytes, &tpath)?;

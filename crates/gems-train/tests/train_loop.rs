@@ -114,3 +114,32 @@ fn output_round_trips_and_bad_files_are_named() {
     let e = load_checkpoint(dir.path()).unwrap_err().to_string();
     assert!(e.contains("checkpoint.json"), "{e}");
 }
+
+/// A `model.json` whose knot count does not fit its trajectory kind is refused by `load`, with
+/// the file and the view named, so `trajectory()` cannot panic on it later.
+#[test]
+fn output_with_wrong_knot_count_is_refused() {
+    let mut cfg = small_config();
+    cfg.steps = 1;
+    let mut t = trainer(&cfg);
+    t.run(|_, _| Ok(())).unwrap();
+    let out = TrainOutput::from_trainer(&t);
+    let dir = tempfile::tempdir().unwrap();
+    out.save(dir.path()).unwrap();
+    let jpath = dir.path().join("model.json");
+    let meta: serde_json::Value = serde_json::from_slice(&std::fs::read(&jpath).unwrap()).unwrap();
+
+    // Fewer knots than the Bézier config asks for.
+    let mut short = meta.clone();
+    short["views"][1]["knots"].as_array_mut().unwrap().truncate(3);
+    std::fs::write(&jpath, serde_json::to_vec(&short).unwrap()).unwrap();
+    let e = TrainOutput::load(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("model.json") && e.contains("3 trajectory knots"), "{e}");
+
+    // The trainer's knots under a kind that needs another count (a spline has 4).
+    let mut spline = meta;
+    spline["config"]["trajectory"] = "spline".into();
+    std::fs::write(&jpath, serde_json::to_vec(&spline).unwrap()).unwrap();
+    let e = TrainOutput::load(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("needs 4"), "{e}");
+}
