@@ -256,8 +256,16 @@ impl CamAcc {
     }
 }
 
-/// Backward of [`project`] for a Gaussian that was not culled: accumulates into `ga` and `ca`.
-#[allow(clippy::too_many_arguments)]
+/// Where [`project_backward`] adds the gradients of one (camera, Gaussian) pair.
+pub(crate) struct PairAcc<'a> {
+    /// The Gaussian's parameter gradients (summed over cameras).
+    pub gauss: &'a mut GaussAcc,
+    /// The camera's pose gradient (summed over Gaussians).
+    pub cam: &'a mut CamAcc,
+}
+
+/// Backward of [`project`] for Gaussian `i` of `g` (prepared as `prep`), which was not culled:
+/// accumulates into `acc`.
 pub(crate) fn project_backward(
     g: &Gaussians,
     i: usize,
@@ -265,9 +273,9 @@ pub(crate) fn project_backward(
     cam: &Cam,
     s: &RenderSettings,
     v: &ProjGrad,
-    ga: &mut GaussAcc,
-    ca: &mut CamAcc,
+    acc: PairAcc<'_>,
 ) {
+    let PairAcc { gauss: ga, cam: ca } = acc;
     let mean = g.means[i].map(f64::from);
     let geo = geometry(mean, &prep.cov, cam);
     let [x, y, z] = geo.pc;
@@ -571,7 +579,11 @@ pub(crate) fn backward_all<T: Real>(
                             if let Some(v) = upstream(c, i) {
                                 count += 1;
                                 norm += v.mean2d[0].hypot(v.mean2d[1]);
-                                project_backward(g, i, prep, cam, s, &v, &mut ga, &mut cam_acc[c]);
+                                let acc = PairAcc {
+                                    gauss: &mut ga,
+                                    cam: &mut cam_acc[c],
+                                };
+                                project_backward(g, i, prep, cam, s, &v, acc);
                             }
                         }
                     }

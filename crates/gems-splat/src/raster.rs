@@ -262,10 +262,12 @@ impl Renderer {
                     &rules,
                     origin,
                     (w, h),
-                    rgb,
-                    t,
-                    last,
-                    depth,
+                    TileOut {
+                        rgb,
+                        t,
+                        last,
+                        depth,
+                    },
                 );
             });
 
@@ -640,7 +642,6 @@ macro_rules! multiversion {
     ($features:literal, $generic:ident, $fast:ident, ($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty) => {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = $features)]
-        #[allow(clippy::too_many_arguments)]
         fn $fast($($arg: $ty),*) -> $ret {
             $generic($($arg),*)
         }
@@ -653,25 +654,30 @@ macro_rules! multiversion {
 /// per-pixel state in structure-of-arrays tile buffers. The lane loop is branch-free
 /// (masks and selects instead of `continue`) so that it vectorises; masked lanes add exact
 /// zeros and keep their state.
-#[allow(clippy::too_many_arguments)]
+// Unsafe only to call the `#[target_feature]` build after the runtime CPU check.
+#[allow(unsafe_code)]
 fn raster_tile_forward(
     sc: &[Splat],
     rules: &PixelRules,
     origin: (usize, usize),
     size: (usize, usize),
-    rgb: &mut [[f32; 3]],
-    t_out: &mut [f32],
-    last_out: &mut [u32],
-    depth_out: &mut [f32],
+    out: TileOut<'_>,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe {
-            raster_tile_forward_avx2(sc, rules, origin, size, rgb, t_out, last_out, depth_out)
-        };
+        return unsafe { raster_tile_forward_avx2(sc, rules, origin, size, out) };
     }
-    raster_tile_forward_generic(sc, rules, origin, size, rgb, t_out, last_out, depth_out)
+    raster_tile_forward_generic(sc, rules, origin, size, out)
+}
+
+/// One tile's output buffers (`TILE_PIXELS` entries each, tile-major): colour over a black
+/// background, final transmittance, index of the last contributing splat + 1, expected depth.
+struct TileOut<'a> {
+    rgb: &'a mut [[f32; 3]],
+    t: &'a mut [f32],
+    last: &'a mut [u32],
+    depth: &'a mut [f32],
 }
 
 multiversion!("avx2", raster_tile_forward_generic, raster_tile_forward_avx2, (
@@ -679,24 +685,23 @@ multiversion!("avx2", raster_tile_forward_generic, raster_tile_forward_avx2, (
     rules: &PixelRules,
     origin: (usize, usize),
     size: (usize, usize),
-    rgb: &mut [[f32; 3]],
-    t_out: &mut [f32],
-    last_out: &mut [u32],
-    depth_out: &mut [f32],
+    out: TileOut<'_>,
 ) -> ());
 
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn raster_tile_forward_generic(
     sc: &[Splat],
     rules: &PixelRules,
     origin: (usize, usize),
     (w, h): (usize, usize),
-    rgb: &mut [[f32; 3]],
-    t_out: &mut [f32],
-    last_out: &mut [u32],
-    depth_out: &mut [f32],
+    out: TileOut<'_>,
 ) {
+    let TileOut {
+        rgb,
+        t: t_out,
+        last: last_out,
+        depth: depth_out,
+    } = out;
     let mut t = [1.0f32; PADDED];
     let mut cr = [0.0f32; PADDED];
     let mut cg = [0.0f32; PADDED];
@@ -794,6 +799,8 @@ struct TileBackward<'a> {
 /// colour behind, `LANES` pixels at a time with masks (as in the forward); writes each list
 /// entry's summed gradient into `grads` (per-lane partial sums added in lane order, so the
 /// result is deterministic) and returns the tile's background gradient.
+// Unsafe only to call the `#[target_feature]` builds after the runtime CPU checks.
+#[allow(unsafe_code)]
 fn raster_tile_backward(sc: &[Splat], ctx: &TileBackward<'_>, grads: &mut [SplatGrad]) -> [f64; 3] {
     #[cfg(target_arch = "x86_64")]
     {
@@ -1026,10 +1033,22 @@ mod tests {
                 (rgb, t, last, depth)
             };
             let fast = forward(&|rgb, t, last, depth| {
-                raster_tile_forward(&sc, &rules, origin, size, rgb, t, last, depth)
+                let out = TileOut {
+                    rgb,
+                    t,
+                    last,
+                    depth,
+                };
+                raster_tile_forward(&sc, &rules, origin, size, out);
             });
             let portable = forward(&|rgb, t, last, depth| {
-                raster_tile_forward_generic(&sc, &rules, origin, size, rgb, t, last, depth)
+                let out = TileOut {
+                    rgb,
+                    t,
+                    last,
+                    depth,
+                };
+                raster_tile_forward_generic(&sc, &rules, origin, size, out);
             });
             let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(fast.0.as_flattened()), bits(portable.0.as_flattened()));
