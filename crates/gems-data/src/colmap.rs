@@ -725,7 +725,7 @@ pub fn parse_images_txt(text: &str) -> std::result::Result<Vec<Image>, FormatErr
         };
         let mut rest = line.trim_start();
         let mut toks = [""; 9];
-        for tok in toks.iter_mut() {
+        for tok in &mut toks {
             let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
             *tok = &rest[..end];
             rest = rest[end..].trim_start();

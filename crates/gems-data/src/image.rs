@@ -43,7 +43,7 @@ impl ImageRgb {
 
     /// Size of the pixel buffer in bytes.
     pub fn byte_size(&self) -> usize {
-        self.data.len() * std::mem::size_of::<f32>()
+        self.data.len() * size_of::<f32>()
     }
 
     /// 8-bit copy, or `None` when `data` does not have `width * height * 3` values.
@@ -342,7 +342,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("a.png");
         let mut img = ramp(5, 3);
-        for v in img.data.iter_mut() {
+        for v in &mut img.data {
             *v = (*v * 255.0).round() / 255.0;
         }
         save_png(&p, &img).unwrap();

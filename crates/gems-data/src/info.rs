@@ -281,7 +281,7 @@ impl fmt::Display for SceneInfo {
         }
         let hold = self
             .hold
-            .map_or("none".to_string(), |h| format!("every {h}th view held out"));
+            .map_or("none".to_owned(), |h| format!("every {h}th view held out"));
         writeln!(
             f,
             "views      {} ({} train, {} deblur-eval, {} novel-view eval; hold: {hold})",

@@ -194,7 +194,9 @@ pub fn parse_subframes(bytes: &[u8]) -> std::result::Result<Vec<Vec<LlffRow>>, F
 /// Serialises rows as `poses_bounds.npy` bytes (float64, N×17).
 pub fn poses_bounds_to_bytes(rows: &[LlffRow]) -> Vec<u8> {
     let mut data = Vec::with_capacity(rows.len() * 17);
-    rows.iter().for_each(|r| r.push_to(&mut data));
+    for r in rows {
+        r.push_to(&mut data);
+    }
     npy::to_bytes_f64(&[rows.len() as u64, 17], &data)
 }
 

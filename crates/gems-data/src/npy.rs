@@ -82,7 +82,7 @@ fn fortran_to_c(data: &[f64], shape: &[u64]) -> Vec<f64> {
     let dims: Vec<usize> = shape.iter().map(|&d| d as usize).collect();
     let mut out = vec![0.0; data.len()];
     let mut idx = vec![0usize; dims.len()];
-    for v in out.iter_mut() {
+    for v in &mut out {
         // Fortran offset of the current C-order multi-index.
         let mut off = 0;
         let mut stride = 1;

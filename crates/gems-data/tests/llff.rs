@@ -67,7 +67,7 @@ fn hand_written_row_matches_llff_convention() {
     let mut bytes = Vec::new();
     // Build the .npy by hand (NEP-01 v1.0) so the test does not depend on our writer.
     let header = "{'descr': '<f8', 'fortran_order': False, 'shape': (1, 17), }";
-    let mut h = header.to_string();
+    let mut h = header.to_owned();
     while !(10 + h.len() + 1).is_multiple_of(64) {
         h.push(' ');
     }
@@ -101,7 +101,7 @@ fn float32_files_are_accepted() {
     let v: Vec<f32> = vec![
         0.0, 1.0, 0.0, 0.0, 10.0, 1.0, 0.0, 0.0, 0.0, 20.0, 0.0, 0.0, -1.0, 0.0, 30.0, 1.0, 2.0,
     ];
-    let mut h = "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 17), }".to_string();
+    let mut h = "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 17), }".to_owned();
     while !(10 + h.len() + 1).is_multiple_of(64) {
         h.push(' ');
     }
@@ -109,8 +109,9 @@ fn float32_files_are_accepted() {
     let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
     bytes.extend_from_slice(&(h.len() as u16).to_le_bytes());
     bytes.extend_from_slice(h.as_bytes());
-    v.iter()
-        .for_each(|x| bytes.extend_from_slice(&x.to_le_bytes()));
+    for x in &v {
+        bytes.extend_from_slice(&x.to_le_bytes());
+    }
     let r = parse_poses_bounds(&bytes).unwrap();
     assert_eq!(r[0].focal(), 30.0);
 }

@@ -103,7 +103,7 @@ pub fn score_image(
 ) -> Result<ImageScore, EvalError> {
     let clamped: Vec<f32> = render.iter().map(|v| v.clamp(0.0, 1.0)).collect();
     Ok(ImageScore {
-        name: name.to_string(),
+        name: name.to_owned(),
         psnr: gems_metrics::psnr(&clamped, gt, height, width)?,
         ssim: gems_metrics::ssim(&clamped, gt, height, width)?,
         lpips: lpips

@@ -267,7 +267,7 @@ fn esc(s: &str) -> String {
 }
 
 fn lpips_cell(v: Option<f64>) -> String {
-    v.map_or_else(|| "—".to_string(), |x| format!("{x:.4}"))
+    v.map_or_else(|| "—".to_owned(), |x| format!("{x:.4}"))
 }
 
 fn split_table(html: &mut String, title: &str, s: &Option<SplitScores>) {
@@ -411,8 +411,8 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
             let (h, w) = (r.height as usize, r.width as usize);
             let cell = |img: Option<&Vec<f32>>| match (img, gt) {
                 (Some(a), Some(b)) => gems_metrics::psnr(a, b, h, w)
-                    .map_or_else(|_| "—".to_string(), |p| format!("{p:.2} dB")),
-                _ => "—".to_string(),
+                    .map_or_else(|_| "—".to_owned(), |p| format!("{p:.2} dB")),
+                _ => "—".to_owned(),
             };
             let _ = writeln!(
                 html,

@@ -91,7 +91,7 @@ fn metrics_json_round_trip_and_keys() {
         assert!(v["ape"][key].is_number(), "missing ape.{key}");
     }
     // A perfect render's infinite PSNR survives the JSON round trip (written as null).
-    let mut perfect = report.clone();
+    let mut perfect = report;
     perfect.deblur.as_mut().unwrap().per_image[0].psnr = f64::INFINITY;
     perfect.deblur.as_mut().unwrap().psnr = f64::INFINITY;
     write_metrics_json(&path, &perfect).unwrap();
@@ -153,7 +153,7 @@ fn ape_is_invariant_to_similarity() {
     let est: Vec<[f64; 3]> = gt.iter().map(|p| sim.act(p)).collect();
     let a = ape_of_centres(&est, &gt).unwrap();
     assert!(a.rmse < 1e-10 && a.max < 1e-10);
-    let mut noisy = est.clone();
+    let mut noisy = est;
     noisy[3][0] += 0.37; // 1 GT unit after undoing the scale
     let b = ape_of_centres(&noisy, &gt).unwrap();
     assert!(b.max > 0.5 && b.max < 1.0 && b.rmse < b.max);
@@ -228,7 +228,7 @@ fn report_writes_html_and_figures() {
     assert!(html.contains("3.10 dB") && html.contains("7.96 dB"));
 
     // With an EDI image the grid gains a column between the input and ours.
-    let mut with_edi = input.clone();
+    let mut with_edi = input;
     with_edi.grid[0].edi = Some(img(0.7));
     let dir2 = tempfile::tempdir().unwrap();
     let html = std::fs::read_to_string(write_report(dir2.path(), &with_edi).unwrap()).unwrap();

@@ -31,7 +31,7 @@ fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
             virtual_c2w: virt.iter().map(Pose::from).collect(),
             mid_c2w: Pose::from(&mid),
         });
-        let gt = gems_eval::refine::render(&mut r, &g, &truth, &k).unwrap();
+        let gt = refine::render(&mut r, &g, &truth, &k).unwrap();
         data.train_blurry
             .push(Some(gt.iter().map(|v| v * 0.8).collect()));
         data.train_gt.push(Some(gt));
@@ -42,7 +42,7 @@ fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
             name: format!("novel{i}"),
             intrinsics: k,
             c2w_init: common::perturb(&truth, [0.02, -0.01, 0.015, 0.008, -0.006, 0.004]),
-            gt: gems_eval::refine::render(&mut r, &g, &truth, &k).unwrap(),
+            gt: refine::render(&mut r, &g, &truth, &k).unwrap(),
         });
     }
     let out = TrainOutput {
@@ -71,7 +71,7 @@ fn protocol_and_outputs() {
     let mut seen = Vec::new();
     let eval =
         evaluate_output_with_progress(&out, &data, &PoseRefineConfig::default(), None, &mut |n| {
-            seen.push(n.to_string())
+            seen.push(n.to_owned());
         })
         .unwrap();
     assert_eq!(seen.len(), evaluation_units(&data));

@@ -200,7 +200,7 @@ fn decompress(compression: i32, payload: &[u8], out: &mut Vec<u8>) -> Result<(),
 }
 
 fn parse_frame(fb: &Fb<'_>, root: Table) -> Result<AedatFrame, String> {
-    let bad = || "corrupt frame".to_string();
+    let bad = || "corrupt frame".to_owned();
     let i64f = |id| {
         fb.field_i64(root, id)
             .ok_or_else(bad)
@@ -296,7 +296,7 @@ fn parse_description(xml: &str) -> Vec<StreamInfo> {
         let k = seg.find(&format!("key=\"{key}\""))?;
         let s = seg[k..].find('>')? + k + 1;
         let e = seg[s..].find('<')? + s;
-        Some(seg[s..e].trim().to_string())
+        Some(seg[s..e].trim().to_owned())
     };
     starts
         .iter()

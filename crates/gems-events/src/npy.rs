@@ -129,7 +129,7 @@ fn read_column<R: Read>(
         _ => {
             return Err(EventError::format(
                 path,
-                format!("array '{name}': unsupported dtype {}", ts),
+                format!("array '{name}': unsupported dtype {ts}"),
             ));
         }
     };

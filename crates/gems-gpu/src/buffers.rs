@@ -48,8 +48,8 @@ pub fn upload<T: bytemuck::Pod>(
     label: &str,
     data: &[T],
 ) -> Result<wgpu::Buffer, GpuError> {
-    assert_eq!(std::mem::size_of::<T>() % 4, 0, "32-bit element types only");
-    let count = std::mem::size_of_val(data) / 4;
+    assert_eq!(size_of::<T>() % 4, 0, "32-bit element types only");
+    let count = size_of_val(data) / 4;
     checked_bytes(ctx, count.max(1), label)?;
     if data.is_empty() {
         return storage_buffer(ctx, label, 1);
@@ -81,7 +81,7 @@ pub fn download<T: bytemuck::Pod>(
     offset: usize,
     count: usize,
 ) -> Result<Vec<T>, GpuError> {
-    assert_eq!(std::mem::size_of::<T>(), 4, "32-bit element types only");
+    assert_eq!(size_of::<T>(), 4, "32-bit element types only");
     if count == 0 {
         return Ok(Vec::new());
     }

@@ -97,7 +97,7 @@ impl GpuContext {
             device_type: format!("{:?}", info.device_type),
             driver: format!("{} {}", info.driver, info.driver_info)
                 .trim()
-                .to_string(),
+                .to_owned(),
             is_software: info.device_type == wgpu::DeviceType::Cpu,
         };
         if summary.is_software && !allow_software {

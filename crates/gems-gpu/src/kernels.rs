@@ -290,7 +290,7 @@ pub(crate) fn read_back(
     device
         .poll(wgpu::PollType::wait_indefinitely())
         .map_err(|e| GpuError::Operation(format!("waiting for the GPU: {e}")))?;
-    for r in rx.iter() {
+    for r in &rx {
         r.map_err(|e| GpuError::Operation(format!("reading back a buffer: {e}")))?;
     }
     let mut out = Vec::with_capacity(sources.len());

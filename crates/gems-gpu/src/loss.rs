@@ -121,7 +121,7 @@ impl BlurLoss {
             ));
         }
         let len = height * width * 3;
-        let total = len.checked_mul(views).filter(|&t| t <= u32::MAX as usize);
+        let total = len.checked_mul(views).filter(|&t| u32::try_from(t).is_ok());
         if total.is_none() {
             return Err(GpuError::Shape(format!(
                 "{views} renders of {height}x{width} exceed 2^32 values"

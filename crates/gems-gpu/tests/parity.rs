@@ -60,7 +60,7 @@ fn assert_forward_matches(what: &str, gpu: &RenderOutput, cpu: &RenderOutput) {
     );
     match (&gpu.depth, &cpu.depth) {
         (Some(a), Some(b)) => {
-            assert_close(&format!("{what} depth"), &f64v(a), &f64v(b), 1e-4, 1e-4)
+            assert_close(&format!("{what} depth"), &f64v(a), &f64v(b), 1e-4, 1e-4);
         }
         (None, None) => {}
         _ => panic!("{what}: depth requested in one engine only"),

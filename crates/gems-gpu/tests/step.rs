@@ -62,7 +62,7 @@ fn gpu_step_matches_the_cpu_chain() {
     let scalars = loss.read(ctx).unwrap();
     let wrong = gems_gpu::ImageBatch {
         count: n - 1,
-        ..batch.clone()
+        ..batch
     };
     assert!(loss.run_batch(ctx, &wrong, &tb).is_err());
     let gpu_grads = gpu_r
@@ -80,7 +80,7 @@ fn gpu_step_matches_the_cpu_chain() {
     let close = |what: &str, a: &[f32], b: &[f32]| {
         let scale = max_abs(b).max(1e-12);
         let d = max_abs_diff(a, b);
-        eprintln!("{what}: max |gpu − cpu| = {:e} of max {scale:e}", d);
+        eprintln!("{what}: max |gpu − cpu| = {d:e} of max {scale:e}");
         assert!(d <= 1e-4 * scale, "{what}: {d} vs scale {scale}");
     };
     close(

@@ -176,7 +176,7 @@ fn main() {
                 results.push(("COLMAP 3.8", out));
             }
             for (name, o) in results {
-                let rm = o.rmse_frac.map_or("–".to_string(), |v| format!("{:.4}", v));
+                let rm = o.rmse_frac.map_or("–".to_owned(), |v| format!("{v:.4}"));
                 println!(
                     "| {seed} | {level} | {blur:.1} | {name} | {}/{} | {} | {rm} | {:.1} |",
                     o.registered,

@@ -43,7 +43,7 @@ fn main() {
                         .split(',')
                         .map(|v| v.parse().unwrap())
                         .collect(),
-                )
+                );
             }
             "--levels-dir" => level_dir = Some(PathBuf::from(it.next().unwrap())),
             s => panic!("unknown argument {s}"),

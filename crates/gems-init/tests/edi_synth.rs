@@ -205,7 +205,7 @@ fn small_preset_exact_edi_gain_and_its_ceiling() {
 fn tiny_scene_files_match_the_simulator_and_write_a_readable_scene() {
     let dir = tempfile::tempdir().unwrap();
     let src = dir.path().join("scene");
-    let synth = gems_synth::SynthConfig::tiny();
+    let synth = SynthConfig::tiny();
     let c = synth.events.as_ref().unwrap().threshold_pos;
     gems_synth::generate(&synth, &src).unwrap();
     let scene = gems_data::open_scene(&src, &gems_data::OpenOptions::default()).unwrap();

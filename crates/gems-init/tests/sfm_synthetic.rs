@@ -213,16 +213,16 @@ fn textureless_images_are_a_clear_error() {
     .unwrap_err();
     match e {
         SfmError::Textureless(names) => {
-            assert_eq!(names, vec!["a.png".to_string(), "b.png".to_string()])
+            assert_eq!(names, vec!["a.png".to_owned(), "b.png".to_owned()]);
         }
         other => panic!("unexpected {other}"),
     }
     // One textureless view among textured ones is reported as unregistered, not an error.
     let s = common::scene(5, 160, 120, 1, 0.12, 5);
-    let mut imgs = s.images.clone();
+    let mut imgs = s.images;
     imgs.push(flat("flat.png", 128));
     let r = run_sfm(&imgs, &SfmOptions::default()).unwrap();
-    assert!(r.stats.unregistered.contains(&"flat.png".to_string()));
+    assert!(r.stats.unregistered.contains(&"flat.png".to_owned()));
     assert_eq!(
         r.stats.registered + r.stats.unregistered.len(),
         r.stats.total

@@ -128,13 +128,13 @@ impl Lpips {
             |names: &[String], expected: &[usize]| -> Result<Tensor, LpipsError> {
                 let t = names.iter().find_map(|n| tensors.get(n)).ok_or_else(|| {
                     LpipsError::Missing {
-                        files: files.to_string(),
+                        files: files.to_owned(),
                         name: names.join("` or `"),
                     }
                 })?;
                 if t.dims() != expected {
                     return Err(LpipsError::Shape {
-                        files: files.to_string(),
+                        files: files.to_owned(),
                         name: names[0].clone(),
                         got: t.dims().to_vec(),
                         expected: expected.to_vec(),
@@ -155,7 +155,7 @@ impl Lpips {
         }
         let constant = |name: &str, default: [f32; 3]| -> Result<Tensor, LpipsError> {
             match tensors.get(name) {
-                Some(_) => get(&[name.to_string()], &[1, 3, 1, 1]),
+                Some(_) => get(&[name.to_owned()], &[1, 3, 1, 1]),
                 None => Ok(Tensor::from_slice(&default, (1, 3, 1, 1), &Device::Cpu)?),
             }
         };

@@ -29,7 +29,7 @@ fn weights() -> Vec<Entry> {
                 return format!("{tv}{rest}");
             }
         }
-        n.to_string()
+        n.to_owned()
     };
     st.tensors()
         .into_iter()

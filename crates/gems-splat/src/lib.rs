@@ -225,7 +225,7 @@ impl Camera {
     pub(crate) fn check(&self, index: usize) -> Result<(), SplatError> {
         let bad = |reason: &str| SplatError::InvalidCamera {
             index,
-            reason: reason.to_string(),
+            reason: reason.to_owned(),
         };
         let intr = [self.fx, self.fy, self.cx, self.cy];
         if !intr.iter().all(|v| v.is_finite()) || self.fx <= 0.0 || self.fy <= 0.0 {

@@ -30,10 +30,10 @@ const SLOTS: usize = SLOT_ROT + 4;
 /// Property name of each slot.
 fn slot_name(slot: usize) -> String {
     match slot {
-        0..3 => ["x", "y", "z"][slot].to_string(),
-        3..6 => ["nx", "ny", "nz"][slot - SLOT_NORMAL].to_string(),
+        0..3 => ["x", "y", "z"][slot].to_owned(),
+        3..6 => ["nx", "ny", "nz"][slot - SLOT_NORMAL].to_owned(),
         6..9 => format!("f_dc_{}", slot - SLOT_DC),
-        SLOT_OPACITY => "opacity".to_string(),
+        SLOT_OPACITY => "opacity".to_owned(),
         s if (SLOT_REST..SLOT_OPACITY).contains(&s) => format!("f_rest_{}", s - SLOT_REST),
         s if (SLOT_SCALE..SLOT_ROT).contains(&s) => format!("scale_{}", s - SLOT_SCALE),
         s => format!("rot_{}", s - SLOT_ROT),

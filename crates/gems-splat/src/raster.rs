@@ -668,7 +668,7 @@ fn raster_tile_forward(
         // SAFETY: the CPU supports AVX2 (checked just above).
         return unsafe { raster_tile_forward_avx2(sc, rules, origin, size, out) };
     }
-    raster_tile_forward_generic(sc, rules, origin, size, out)
+    raster_tile_forward_generic(sc, rules, origin, size, out);
 }
 
 /// One tile's output buffers (`TILE_PIXELS` entries each, tile-major): colour over a black

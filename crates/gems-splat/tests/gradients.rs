@@ -109,7 +109,7 @@ fn run_fd(antialiased: bool, seed: u64) {
             check(&format!("mean[{i}][{k}]"), d, gr.means[i][k], s_means);
             let x = g.log_scales[i][k];
             let d = fd(&loss, &g, &cams, x, h_of(x), |g, _, v| {
-                g.log_scales[i][k] = v
+                g.log_scales[i][k] = v;
             });
             check(
                 &format!("log_scale[{i}][{k}]"),
@@ -125,7 +125,7 @@ fn run_fd(antialiased: bool, seed: u64) {
         }
         let x = g.opacity_logits[i];
         let d = fd(&loss, &g, &cams, x, h_of(x), |g, _, v| {
-            g.opacity_logits[i] = v
+            g.opacity_logits[i] = v;
         });
         check(&format!("opacity[{i}]"), d, gr.opacity_logits[i], s_op);
         for k in 0..16 {
@@ -159,7 +159,7 @@ fn run_fd(antialiased: bool, seed: u64) {
         for k in 0..3 {
             let x = cams[c].translation[k];
             let d = fd(&loss, &g, &cams, x, 1e-3, |_, cs, v| {
-                cs[c].translation[k] = v
+                cs[c].translation[k] = v;
             });
             check(
                 &format!("cam t[{c}][{k}]"),

@@ -28,7 +28,7 @@ fn scene() -> Gaussians {
             2.0 + rng.random::<f32>() * 2.0,
         ];
         let mut sh = [[0.0f32; 3]; 16];
-        for c in sh.iter_mut() {
+        for c in &mut sh {
             *c = std::array::from_fn(|_| (rng.random::<f32>() - 0.5) * 0.3);
         }
         let s = (0.005 + 0.02 * rng.random::<f32>()).ln();

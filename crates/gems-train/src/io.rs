@@ -53,7 +53,7 @@ struct TensorSet {
 impl TensorSet {
     fn add(&mut self, name: &str, shape: Vec<usize>, data: &[f32]) {
         self.tensors
-            .push((name.to_string(), shape, bytemuck::cast_slice(data).to_vec()));
+            .push((name.to_owned(), shape, bytemuck::cast_slice(data).to_vec()));
     }
 
     fn serialize(&self, metadata: HashMap<String, String>) -> Result<Vec<u8>, String> {
@@ -177,7 +177,7 @@ pub fn save_checkpoint(dir: &Path, t: &Trainer) -> Result<(), TrainError> {
     ts.add("knot_adam.m", vec![nk], &s.knot_adam.m);
     ts.add("knot_adam.v", vec![nk], &s.knot_adam.v);
     ts.add("knot_grad_acc", vec![nk], &s.knot_grad_acc);
-    let meta = HashMap::from([("step".to_string(), s.step.to_string())]);
+    let meta = HashMap::from([("step".to_owned(), s.step.to_string())]);
     let tpath = dir.join(CHECKPOINT_TENSORS);
     let bytes = ts.serialize(meta).map_err(|e| format_err(&tpath, e))?;
     write_atomic(&tpath, &bytes)?;

@@ -193,7 +193,6 @@ fn sh_band_rotations(rt: &Matrix3<f64>) -> [DMatrix<f64>; 3] {
         let b = DMatrix::from_fn(k, len, |i, j| sh_basis(&(q * dirs[i]))[off + j]);
         // Y_old(Q d) = M Y(d) row-wise: B = A Mᵀ; then c_new = Mᵀ c_old.
         let mt = a
-            .clone()
             .svd(true, true)
             .solve(&b, 1e-12)
             .expect("SVD solve of a full-rank basis");

@@ -69,7 +69,7 @@ fn same_seed_same_result_and_resume_is_bit_identical() {
     let fresh = trainer(&cfg);
     let mut d = Trainer::from_state(
         cfg2,
-        fresh.views.clone(),
+        fresh.views,
         Normalization::identity(),
         1.0,
         "gt-noisy".into(),
@@ -131,10 +131,16 @@ fn output_with_wrong_knot_count_is_refused() {
 
     // Fewer knots than the Bézier config asks for.
     let mut short = meta.clone();
-    short["views"][1]["knots"].as_array_mut().unwrap().truncate(3);
+    short["views"][1]["knots"]
+        .as_array_mut()
+        .unwrap()
+        .truncate(3);
     std::fs::write(&jpath, serde_json::to_vec(&short).unwrap()).unwrap();
     let e = TrainOutput::load(dir.path()).unwrap_err().to_string();
-    assert!(e.contains("model.json") && e.contains("3 trajectory knots"), "{e}");
+    assert!(
+        e.contains("model.json") && e.contains("3 trajectory knots"),
+        "{e}"
+    );
 
     // The trainer's knots under a kind that needs another count (a spline has 4).
     let mut spline = meta;

@@ -93,7 +93,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &refine,
         lpips.as_ref(),
         &mut |name| {
-            bar.set_message(name.to_string());
+            bar.set_message(name.to_owned());
             bar.inc(1);
         },
     )?;
@@ -107,11 +107,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     let fmt = |s: &Option<gems_eval::SplitScores>| {
         s.as_ref().map_or_else(
-            || "n/a".to_string(),
+            || "n/a".to_owned(),
             |s| {
                 let lpips = s
                     .lpips
-                    .map_or_else(|| "absent".to_string(), |l| format!("{l:.4}"));
+                    .map_or_else(|| "absent".to_owned(), |l| format!("{l:.4}"));
                 format!("PSNR {:.2} SSIM {:.4} LPIPS {lpips}", s.psnr, s.ssim)
             },
         )

@@ -400,7 +400,7 @@ fn write_into(scene: &Scene, edi: &EdiScene, dir: &Path) -> Result<(), EdiError>
         }
     }
     let report = serde_json::json!({
-        "mode": match edi.mode { EdiMode::Exact => "exact".to_string(), EdiMode::Binned { bins } => format!("binned_{bins}") },
+        "mode": match edi.mode { EdiMode::Exact => "exact".to_owned(), EdiMode::Binned { bins } => format!("binned_{bins}") },
         "skipped": edi.skipped,
         "views": edi.views.iter().map(|v| serde_json::json!({
             "name": v.name,

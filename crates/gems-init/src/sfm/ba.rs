@@ -469,7 +469,7 @@ mod tests {
             o.xy += Vector2::new(40.0, -25.0);
         }
         let mut poses = gt_poses.clone();
-        let mut pts = gt_pts.clone();
+        let mut pts = gt_pts;
         let mut kk = k;
         let mut fixed = vec![false; poses.len()];
         fixed[0] = true;

@@ -88,7 +88,7 @@ pub fn run_colmap_cli(
     let s = |p: &Path| p.display().to_string();
     let gpu = if opts.use_gpu { "1" } else { "0" };
     let mut fe = vec![
-        "feature_extractor".to_string(),
+        "feature_extractor".to_owned(),
         "--database_path".into(),
         s(&db),
         "--image_path".into(),
@@ -122,7 +122,7 @@ pub fn run_colmap_cli(
         work_dir,
     )?;
     let mut mapper = vec![
-        "mapper".to_string(),
+        "mapper".to_owned(),
         "--database_path".into(),
         s(&db),
         "--image_path".into(),

@@ -270,7 +270,7 @@ pub(crate) fn extract(img: &Gray, p: &FeatureParams) -> Features {
             0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt()
         })
         .collect();
-    let max_resp = resp.iter().cloned().fold(0.0f32, f32::max);
+    let max_resp = resp.iter().copied().fold(0.0f32, f32::max);
     if max_resp <= 1e-12 {
         return Features::default();
     }
@@ -377,7 +377,9 @@ fn describe(s: &Gray, cx: f32, cy: f32, step: f32, out: &mut [f32; DESC_LEN]) ->
         return false;
     }
     let inv = 1.0 / norm.sqrt();
-    out.iter_mut().for_each(|v| *v *= inv);
+    for v in out.iter_mut() {
+        *v *= inv;
+    }
     true
 }
 

@@ -250,10 +250,10 @@ fn run_ba(r: &mut Recon, fixed_view: usize, refine_focal: bool, iters: usize, op
 /// Deactivate observations beyond the reprojection threshold; drop points left with < 2.
 fn filter_outliers(r: &mut Recon, opts: &SfmOptions) {
     let k = r.k;
-    for t in r.tracks.iter_mut() {
+    for t in &mut r.tracks {
         let Some(x) = t.xyz else { continue };
         let mut n = 0;
-        for o in t.obs.iter_mut() {
+        for o in &mut t.obs {
             let Some(p) = r.poses[o.view] else { continue };
             if !o.active {
                 continue;
@@ -274,7 +274,7 @@ fn filter_outliers(r: &mut Recon, opts: &SfmOptions) {
 fn triangulate_all(r: &mut Recon, opts: &SfmOptions) -> usize {
     let k = r.k;
     let mut added = 0;
-    for t in r.tracks.iter_mut() {
+    for t in &mut r.tracks {
         if t.xyz.is_none() && triangulate_track(t, &r.poses, &k, opts) {
             added += 1;
         }

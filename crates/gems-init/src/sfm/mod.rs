@@ -425,7 +425,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         return Err(SfmError::TooFewRegistered {
             registered: result.stats.registered,
             total: result.stats.total,
-            unregistered: result.stats.unregistered.clone(),
+            unregistered: result.stats.unregistered,
         });
     }
     Ok(result)

@@ -138,7 +138,9 @@ fn normalise(v: &mut [f32]) -> bool {
         return false;
     }
     let inv = 1.0 / n.sqrt();
-    v.iter_mut().for_each(|x| *x *= inv);
+    for x in v.iter_mut() {
+        *x *= inv;
+    }
     true
 }
 

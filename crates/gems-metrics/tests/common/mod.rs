@@ -54,7 +54,7 @@ pub fn load(name: &str) -> Pair {
         .into_iter()
         .filter_map(|(k, v)| {
             k.strip_prefix(&format!("{name}_"))
-                .map(|s| (s.to_string(), v.parse().unwrap()))
+                .map(|s| (s.to_owned(), v.parse().unwrap()))
         })
         .collect();
     Pair {

@@ -39,7 +39,7 @@ impl Case {
                     .collect(),
                 d => panic!("unexpected dtype {d:?}"),
             };
-            tensors.insert(k.to_string(), (v.shape().to_vec(), data));
+            tensors.insert(k.clone(), (v.shape().to_vec(), data));
         }
         let num = |k: &str| meta[k].parse::<u32>().unwrap();
         Case {

@@ -144,7 +144,7 @@ pub fn blur_scene(
         gt_motion: vec![],
         gt: gt.clone(),
     };
-    let mut g = gt.clone();
+    let mut g = gt;
     g.sh_degree = 0;
     for v in 0..n_views {
         let mid = pose(
