@@ -255,7 +255,7 @@ fn deblur_nerf_real(dir: &Path) -> PathBuf {
     let real = dir.join("blurball");
     for e in std::fs::read_dir(synth.join("images")).unwrap() {
         let p = e.unwrap().path();
-        let stem = p.file_stem().unwrap().to_str().unwrap().to_string();
+        let stem = p.file_stem().unwrap().to_str().unwrap().to_owned();
         let img = gems_data::load_image(&p).unwrap();
         gems_data::image::save_image_auto(&real.join(format!("images/{stem}.jpg")), &img).unwrap();
         let small = gems_data::image::downscale_area(&img, 48, 32);

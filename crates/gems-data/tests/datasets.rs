@@ -15,7 +15,7 @@ fn write_img(path: &Path, w: u32, h: u32, seed: u32) {
         *v = ((i as u32 * 37 + seed * 11) % 256) as f32 / 255.0;
     }
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    gems_data::image::save_image_auto(path, &img).unwrap();
+    image::save_image_auto(path, &img).unwrap();
 }
 
 fn pose(i: usize) -> Pose {
@@ -134,7 +134,7 @@ fn deblur_nerf_real_opens_at_its_evaluation_resolution_read_only() {
         text.contains("dataset    Deblur-NeRF / LLFF") && !text.contains("sfm        none"),
         "{text}"
     );
-    assert!(gems_data::check::check_scene(&s).is_empty());
+    assert!(check::check_scene(&s).is_empty());
     assert_eq!(snapshot(root), before);
 
     // A copy that ships only images_4/: its files are the views.
@@ -293,7 +293,7 @@ fn check_finds_every_problem_one_line_each() {
     )
     .unwrap();
     let s = open_scene(root, &OpenOptions::default()).unwrap();
-    let problems: Vec<String> = gems_data::check::check_scene(&s)
+    let problems: Vec<String> = check::check_scene(&s)
         .iter()
         .map(ToString::to_string)
         .collect();
@@ -360,7 +360,7 @@ fn exif_focal_in_pixels() {
             field(Tag::FocalLengthIn35mmFilm, Value::Short(vec![28])),
         ],
     );
-    let f = gems_data::exif::focal_from_exif(&a, 64, 48).unwrap();
+    let f = exif::focal_from_exif(&a, 64, 48).unwrap();
     assert!((f.focal_px - 31.5).abs() < 1e-9, "{f:?}");
     assert!(f.source.contains("FocalPlaneXResolution"), "{f:?}");
     // Resolution per inch (the default unit): 4.2 mm · 254 px/inch / 25.4 = 42 px.
@@ -373,7 +373,7 @@ fn exif_focal_in_pixels() {
             field(Tag::FocalPlaneXResolution, rational(254, 1)),
         ],
     );
-    let f = gems_data::exif::focal_from_exif(&a, 64, 48).unwrap();
+    let f = exif::focal_from_exif(&a, 64, 48).unwrap();
     assert!((f.focal_px - 42.0).abs() < 1e-9, "{f:?}");
     // A phone: only the 35 mm equivalent. 27 mm on a 36 mm frame, long side 64 px → 48 px.
     jpeg_with_exif(
@@ -385,15 +385,15 @@ fn exif_focal_in_pixels() {
             field(Tag::FocalLengthIn35mmFilm, Value::Short(vec![27])),
         ],
     );
-    let f = gems_data::exif::focal_from_exif(&a, 64, 48).unwrap();
+    let f = exif::focal_from_exif(&a, 64, 48).unwrap();
     assert!((f.focal_px - 48.0).abs() < 1e-9, "{f:?}");
     assert!(f.source.contains("35mm"), "{f:?}");
     // The folder's focal is the first photo's; photos without EXIF give none.
-    let g = gems_data::exif::folder_focal(&dir.path().join("photos")).unwrap();
+    let g = exif::folder_focal(&dir.path().join("photos")).unwrap();
     assert_eq!(g.image, a);
     let plain = dir.path().join("plain/b.png");
     write_img(&plain, 8, 6, 1);
-    assert!(gems_data::exif::folder_focal(plain.parent().unwrap()).is_none());
+    assert!(exif::folder_focal(plain.parent().unwrap()).is_none());
     // `gems info` says where the focal came from.
     let s = open_scene(&dir.path().join("photos"), &OpenOptions::default()).unwrap();
     let text = scene_info(&s, false).unwrap().to_string();

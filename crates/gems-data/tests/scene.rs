@@ -152,7 +152,7 @@ fn prism3d_images_gt_gives_ground_truth_by_name() {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path();
     make_gems(root, 4, 8, 8, 6);
-    std::fs::remove_file(root.join(gems_data::manifest::MANIFEST_FILE)).unwrap();
+    std::fs::remove_file(root.join(manifest::MANIFEST_FILE)).unwrap();
     // PRISM3D's GT list, in a different order and with different ids than the SfM model.
     let gt: Vec<Image> = [2usize, 0]
         .iter()
@@ -225,7 +225,7 @@ fn distorted_cameras_are_undistorted_into_copies() {
     );
     // The copy is the undistortion of the original.
     let cam = &m.cameras[0];
-    let map = gems_data::undistort::UndistortMap::new(cam, 16, 12).unwrap();
+    let map = undistort::UndistortMap::new(cam, 16, 12).unwrap();
     let want = map
         .apply(&load_image(&root.join("images/002.png")).unwrap())
         .unwrap();
@@ -341,7 +341,7 @@ fn downscaled_copies_go_to_the_cache_never_into_the_scene() {
     // Area filter: the copy equals the area-filtered full image (8-bit rounding aside).
     let full = load_image(&root.join("images/002.png")).unwrap();
     let small = load_image(&cache.join("images_2/002.png")).unwrap();
-    let expect = gems_data::image::downscale_area(&full, 4, 3);
+    let expect = image::downscale_area(&full, 4, 3);
     for (a, b) in small.data.iter().zip(&expect.data) {
         assert!((a - b).abs() <= 0.5 / 255.0 + 1e-6);
     }
@@ -384,8 +384,7 @@ fn an_existing_downscaled_folder_is_paired_by_stem_then_by_order() {
         let stem = n.trim_end_matches(".png");
         let mut img = ImageRgb::new(4, 3);
         img.data.fill(i as f32 / 4.0);
-        gems_data::image::save_image_auto(&root.join(format!("images_2/{stem}.jpg")), &img)
-            .unwrap();
+        image::save_image_auto(&root.join(format!("images_2/{stem}.jpg")), &img).unwrap();
     }
     let opts = OpenOptions {
         downscale: 2,
@@ -413,7 +412,7 @@ fn an_existing_downscaled_folder_is_paired_by_stem_then_by_order() {
     std::fs::remove_file(root.join("images_2/d.png")).unwrap();
     let e = open_scene(root, &opts).unwrap_err().to_string();
     assert!(
-        e.contains("images_2") && e.contains("holds 3 images") && e.contains("4"),
+        e.contains("images_2") && e.contains("holds 3 images") && e.contains('4'),
         "{e}"
     );
     assert_eq!(std::fs::read_dir(root.join("images_2")).unwrap().count(), 3);
@@ -564,8 +563,7 @@ fn nerfstudio_opengl_convention() {
     );
     assert_eq!((s.views[0].width, s.views[0].height), (5, 5));
     // … and its own train_2/ (matched by stem) when it has one.
-    gems_data::image::save_image_auto(&dir.path().join("train_2/r_0.jpg"), &ImageRgb::new(5, 5))
-        .unwrap();
+    image::save_image_auto(&dir.path().join("train_2/r_0.jpg"), &ImageRgb::new(5, 5)).unwrap();
     let s = open_scene(dir.path(), &opts).unwrap();
     assert_eq!(s.views[0].image, dir.path().join("train_2/r_0.jpg"));
     assert_eq!(s.views[0].name, "r_0.png");
@@ -803,7 +801,7 @@ fn time_units_are_detected_across_a_scenes_files() {
         [Some(21), Some(21), Some(21)],
         "every window holds events"
     );
-    assert!(gems_data::check::check_scene(&s).is_empty());
+    assert!(check::check_scene(&s).is_empty());
     // The same windows in µs are read as µs.
     std::fs::write(
         root.join("exposure_start_ts.txt"),

@@ -117,7 +117,7 @@ fn bad_folders_are_clear_errors() {
         "0.0 a.png\n0.1 missing.png\n",
     )
     .unwrap();
-    write_frames(d.path(), &["a.png".to_string()]);
+    write_frames(d.path(), &["a.png".to_owned()]);
     let e = simulate_folder(d.path(), &SimConfig::default(), FrameEncoding::Srgb, None)
         .unwrap_err()
         .to_string();
