@@ -670,20 +670,26 @@ fn encode_scan(
     data: &wgpu::Buffer,
     n: usize,
 ) -> Result<(), GpuError> {
-    encode_scan_level(dev, lim, k, enc, levels, 0, data, n)
+    let gpu = ScanGpu { dev, lim, k };
+    encode_scan_level(&gpu, enc, levels, 0, data, n)
 }
 
-#[allow(clippy::too_many_arguments)]
+/// The device, its limits and the kernels, as one argument of the recursive scan.
+struct ScanGpu<'a> {
+    dev: &'a wgpu::Device,
+    lim: &'a wgpu::Limits,
+    k: &'a Kernels,
+}
+
 fn encode_scan_level(
-    dev: &wgpu::Device,
-    lim: &wgpu::Limits,
-    k: &Kernels,
+    gpu: &ScanGpu<'_>,
     enc: &mut wgpu::CommandEncoder,
     levels: &mut Vec<Resident>,
     level: usize,
     data: &wgpu::Buffer,
     n: usize,
 ) -> Result<(), GpuError> {
+    let ScanGpu { dev, lim, k } = *gpu;
     let blocks = n.div_ceil(WG as usize);
     while levels.len() <= level {
         levels.push(Resident::new("prefix-sum block totals"));
@@ -696,7 +702,7 @@ fn encode_scan_level(
     };
     dispatch(dev, enc, &k.scan_blocks, &p, &[data, &sums], blocks as u32);
     if blocks > 1 {
-        encode_scan_level(dev, lim, k, enc, levels, level + 1, &sums, blocks)?;
+        encode_scan_level(gpu, enc, levels, level + 1, &sums, blocks)?;
         dispatch(dev, enc, &k.add_offsets, &p, &[data, &sums], blocks as u32);
     }
     Ok(())

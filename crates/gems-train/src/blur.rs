@@ -185,7 +185,6 @@ pub fn render_blurred<R: Rasterizer + ?Sized>(
 /// Back-propagates dL/d(blurred) (`d_blurred`, `[H,W,3]`) through the blur model for the cameras
 /// of the last [`render_blurred`]: returns the renderer's gradients (Gaussians and per-camera
 /// poses) and adds each knot's gradient to `knot_grads` (one [ρ; φ] per knot).
-#[allow(clippy::too_many_arguments)]
 pub fn backward_blurred<R: Rasterizer + ?Sized>(
     r: &mut R,
     g: &Gaussians,
