@@ -36,7 +36,7 @@ fn trained_scene_viewer_and_exports() {
     let dir = tmp.path();
     let scene = dir.join("scene");
     let out = dir.join("run");
-    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let s = |p: &Path| p.to_str().unwrap().to_owned();
     gems(&["synth", "--preset", "tiny", "-o", &s(&scene)]);
     gems(&[
         "train",

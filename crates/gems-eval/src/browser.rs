@@ -117,7 +117,7 @@ pub fn dump_dom(url: &str, w: u32, h: u32, work: &Path) -> Result<String, EvalEr
         w,
         h,
         &work.join("chromium-profile"),
-        &["--dump-dom".to_string()],
+        &["--dump-dom".to_owned()],
     )?;
     Ok(String::from_utf8_lossy(&out).into_owned())
 }

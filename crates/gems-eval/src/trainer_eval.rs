@@ -448,7 +448,7 @@ pub fn viewer_scene(output: &TrainOutput, data: &EvalData) -> ViewerScene {
                 data: img.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
             },
         ));
-        Some((label.to_string(), rel))
+        Some((label.to_owned(), rel))
     };
     let mut cameras = Vec::new();
     for (i, v) in output.views.iter().enumerate() {
