@@ -174,6 +174,8 @@ impl Camera {
 
     /// A camera at `position` looking at `target`, with image "up" (−y in OpenCV) as close to
     /// `up` as possible. Returns `None` when the view direction is degenerate.
+    // fx, fy, cx, cy, width, height are one camera's intrinsics: one parameter once the workspace
+    // has a single `Intrinsics` type (issue 12), so the signature moves once.
     #[allow(clippy::too_many_arguments)]
     pub fn look_at(
         fx: f32,
