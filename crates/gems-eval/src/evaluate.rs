@@ -79,6 +79,14 @@ pub struct ApeSummary {
 pub struct MetricsReport {
     /// Training views rendered at their trajectory midpoint vs their sharp ground truth.
     pub deblur: Option<SplitScores>,
+    /// Training views after test-time pose refinement from their initial pose, Gaussians frozen
+    /// (the GeMS authors' protocol: `GopiRajuMatta/PRISM3D:prism3d_trainer.py`,
+    /// `eval_with_pose_opt`); `deblur` is our stricter figure at the trajectory midpoint.
+    #[serde(default)]
+    pub deblur_refined: Option<SplitScores>,
+    /// Each blurry training input against its sharp ground truth: where the user started.
+    #[serde(default)]
+    pub input: Option<SplitScores>,
     /// Held-out views after test-time pose refinement.
     pub nvs: Option<SplitScores>,
     /// Held-out views at their initial poses.

@@ -7,7 +7,9 @@
 //!   (torchmetrics), LPIPS-Alex when weights are given — otherwise `None`, never a number).
 //! - [`evaluate_output`]: the whole protocol on a trained [`gems_train::io::TrainOutput`]
 //!   (ground truth from the scene folder via [`eval_data_from_scene`]):
-//!   `deblur` (training views at their trajectory midpoint vs sharp GT), `nvs` (held-out views
+//!   `input` (the blurry training images vs sharp GT: where the user started), `deblur`
+//!   (training views at their trajectory midpoint vs sharp GT), `deblur_refined` (training views
+//!   after refinement from their initial pose, the GeMS authors' figure), `nvs` (held-out views
 //!   with refinement), `nvs_no_pose_opt` (held-out views at their initial pose) and APE
 //!   ([`ape_of_centres`]: Sim(3) Umeyama of midpoint camera centres to the ground truth, evo's
 //!   statistics, in the input frame's units). The result serialises to `metrics.json`

@@ -338,7 +338,7 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
             crate::viewer::viewer_page(scene, &input.title).as_bytes(),
         )?;
     }
-    if [&m.deblur, &m.nvs, &m.nvs_no_pose_opt]
+    if [&m.deblur, &m.deblur_refined, &m.nvs, &m.nvs_no_pose_opt]
         .iter()
         .any(|s| s.as_ref().is_some_and(|s| s.lpips.is_none()))
     {
@@ -347,8 +347,18 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
     html.push_str("<h2>Metrics</h2>\n");
     split_table(
         &mut html,
+        "Blurry input (training images vs their sharp ground truth)",
+        &m.input,
+    );
+    split_table(
+        &mut html,
         "Deblurring (training views at trajectory midpoint)",
         &m.deblur,
+    );
+    split_table(
+        &mut html,
+        "Deblurring (test-time pose refinement from the initial pose, as the GeMS authors evaluate)",
+        &m.deblur_refined,
     );
     split_table(&mut html, "Novel views (test-time pose refinement)", &m.nvs);
     split_table(

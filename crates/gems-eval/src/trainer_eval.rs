@@ -12,7 +12,8 @@ use gems_train::io::TrainOutput;
 
 use crate::EvalError;
 use crate::evaluate::{
-    EvalView, MetricsReport, PoseMode, SplitResult, ape_of_centres, evaluate_views_with_progress,
+    EvalView, MetricsReport, PoseMode, SplitResult, SplitScores, ape_of_centres,
+    evaluate_views_with_progress, score_image,
 };
 use crate::refine::PoseRefineConfig;
 use crate::report::{GridRow, ReportInput};
@@ -70,10 +71,10 @@ pub fn evaluate_output(
     evaluate_output_with_progress(output, data, refine, lpips, &mut |_| {})
 }
 
-/// Renders [`evaluate_output`] does: one per deblur view plus two per held-out view; pass it to
-/// a progress bar driven by [`evaluate_output_with_progress`].
+/// Renders [`evaluate_output`] does: two per deblur view (midpoint and refined) plus two per
+/// held-out view; pass it to a progress bar driven by [`evaluate_output_with_progress`].
 pub fn evaluation_units(data: &EvalData) -> usize {
-    data.train_gt.iter().flatten().count() + 2 * data.held_out.len()
+    2 * data.train_gt.iter().flatten().count() + 2 * data.held_out.len()
 }
 
 /// [`evaluate_output`], calling `on_view` with the view name after each of the
@@ -136,6 +137,7 @@ pub fn evaluate_output_on(
     let deblur = run(&train_views, PoseMode::AsGiven)?;
     let nvs_no_pose_opt = run(&held, PoseMode::AsGiven)?;
     let nvs = run(&held, PoseMode::Refine(*refine))?;
+    let deblur_refined = run(&train_views, PoseMode::Refine(*refine))?;
     let (est, gt) = midpoint_and_gt_centres(output);
     let ape = if est.len() < 3 {
         None
@@ -148,8 +150,11 @@ pub fn evaluate_output_on(
             }
         }
     };
+    let input = input_scores(output, data, &deblur_views, lpips)?;
     let metrics = MetricsReport {
         deblur: deblur.scores.clone(),
+        deblur_refined: deblur_refined.scores,
+        input,
         nvs: nvs.scores.clone(),
         nvs_no_pose_opt: nvs_no_pose_opt.scores.clone(),
         ape,
@@ -165,6 +170,31 @@ pub fn evaluate_output_on(
         nvs,
         nvs_no_pose_opt,
     })
+}
+
+/// The blurry inputs of the `views` (indices into `output.views`) scored against their sharp
+/// ground truth: what the user started from, beside every figure of ours. `None` when the blurry
+/// images were not loaded.
+fn input_scores(
+    output: &TrainOutput,
+    data: &EvalData,
+    views: &[usize],
+    lpips: Option<&Lpips>,
+) -> Result<Option<SplitScores>, EvalError> {
+    let mut per_image = Vec::with_capacity(views.len());
+    for &i in views {
+        let (Some(Some(blurry)), Some(Some(gt))) = (data.train_blurry.get(i), data.train_gt.get(i))
+        else {
+            return Ok(None);
+        };
+        let view = &output.views[i];
+        let (h, w) = (
+            view.intrinsics.height as usize,
+            view.intrinsics.width as usize,
+        );
+        per_image.push(score_image(&view.name, blurry, gt, h, w, lpips)?);
+    }
+    Ok(SplitScores::from_images(per_image))
 }
 
 /// Midpoint camera centres and ground-truth centres, in the input frame, of the views whose

@@ -53,6 +53,8 @@ fn metrics_json_round_trip_and_keys() {
     };
     let report = MetricsReport {
         deblur: SplitScores::from_images(vec![img.clone()]),
+        deblur_refined: SplitScores::from_images(vec![img.clone()]),
+        input: SplitScores::from_images(vec![img.clone()]),
         nvs: None,
         nvs_no_pose_opt: SplitScores::from_images(vec![img]),
         ape: Some(ApeSummary {
@@ -74,6 +76,8 @@ fn metrics_json_round_trip_and_keys() {
         serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     for key in [
         "deblur",
+        "deblur_refined",
+        "input",
         "nvs",
         "nvs_no_pose_opt",
         "ape",
@@ -171,6 +175,8 @@ fn report_writes_html_and_figures() {
             ssim: 0.8,
             lpips: None,
         }]),
+        deblur_refined: None,
+        input: None,
         nvs: None,
         nvs_no_pose_opt: None,
         ape: None,

@@ -116,7 +116,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             },
         )
     };
+    println!("input:           {}", fmt(&eval.metrics.input));
     println!("deblur:          {}", fmt(&eval.metrics.deblur));
+    println!("deblur_refined:  {}", fmt(&eval.metrics.deblur_refined));
     println!("nvs:             {}", fmt(&eval.metrics.nvs));
     println!("nvs_no_pose_opt: {}", fmt(&eval.metrics.nvs_no_pose_opt));
     match eval.metrics.ape {
