@@ -100,6 +100,14 @@ fn metrics_json_round_trip_and_keys() {
     perfect.deblur.as_mut().unwrap().psnr = f64::INFINITY;
     write_metrics_json(&path, &perfect).unwrap();
     assert_eq!(read_metrics_json(&path).unwrap(), perfect);
+    // A file written before `deblur_refined` and `input` existed still reads, without them.
+    let mut old = v.clone();
+    let obj = old.as_object_mut().unwrap();
+    obj.remove("deblur_refined");
+    obj.remove("input");
+    std::fs::write(&path, old.to_string()).unwrap();
+    let read = read_metrics_json(&path).unwrap();
+    assert!(read.deblur_refined.is_none() && read.input.is_none() && read.deblur.is_some());
     // A broken file gives an error naming it.
     std::fs::write(&path, "{ not json").unwrap();
     assert!(

@@ -146,6 +146,18 @@ pub fn train_and_report(job: TrainJob<'_>) -> anyhow::Result<Option<PathBuf>> {
         &mut |_view| bar.inc(1),
     )?;
     bar.finish();
+    let m = &eval.metrics;
+    for (label, split) in [
+        ("blurry input", &m.input),
+        ("deblur (trajectory midpoint)", &m.deblur),
+        ("deblur (pose refined, GeMS protocol)", &m.deblur_refined),
+        ("novel views (pose refined)", &m.nvs),
+        ("novel views (initial pose)", &m.nvs_no_pose_opt),
+    ] {
+        if let Some(s) = split {
+            println!("{label}: PSNR {:.2} dB, SSIM {:.4}", s.psnr, s.ssim);
+        }
+    }
     gems_eval::write_metrics_json(&job.output.join("metrics.json"), &eval.metrics)?;
     gems_eval::write_trajectories(job.output, &output)?;
     gems_eval::write_renders_on(&mut engine, job.output, &output, &data, &eval)?;
