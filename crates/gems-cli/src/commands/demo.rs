@@ -149,23 +149,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         device: args.device,
     })?
     .context("evaluation produced no report")?;
-    let metrics = gems_eval::read_metrics_json(&out.join("train").join("metrics.json"))?;
-    let figures = [
-        ("blurry input vs sharp ground truth", &metrics.input),
-        (
-            "deblurring (training views at mid-exposure vs sharp ground truth)",
-            &metrics.deblur,
-        ),
-        (
-            "deblurring after test-time pose refinement (the GeMS authors' protocol)",
-            &metrics.deblur_refined,
-        ),
-    ];
-    for (label, scores) in figures {
-        if let Some(d) = scores {
-            println!("{label}: PSNR {:.2} dB, SSIM {:.3}", d.psnr, d.ssim);
-        }
-    }
+    // The run itself printed every split's figures (pipeline::train_and_report).
     println!("report: {}", report.display());
     Ok(())
 }
