@@ -370,7 +370,8 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
         Some(a) => {
             let _ = writeln!(
                 html,
-                "<h3>APE (Sim(3)-aligned midpoint camera centres, ground-truth units)</h3>\
+                "<h3>APE (Sim(3)-aligned midpoint camera centres against the ground truth: explicit poses, \
+                 else the mid sub-frame of the sub-frame poses; ground-truth units)</h3>\
                  <p>RMSE {:.5}, mean {:.5}, median {:.5}, std {:.5}, max {:.5}</p>",
                 a.rmse, a.mean, a.median, a.std, a.max
             );

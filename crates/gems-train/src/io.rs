@@ -312,6 +312,8 @@ pub struct ViewResult {
     pub name: String,
     pub intrinsics: Intrinsics,
     pub c2w_init: Pose,
+    /// Ground truth for APE: the scene's explicit pose, else the mid sub-frame of its sub-frame
+    /// poses (the mid-exposure pose).
     pub c2w_gt: Option<Pose>,
     /// Trajectory knots [ρ; φ].
     pub knots: Vec<[f64; 6]>,

@@ -63,6 +63,23 @@ fn c2w_of(p: &DataPose) -> Se3 {
     Se3::from_arrays(&p.rotation, &p.translation).inverse()
 }
 
+/// The ground-truth camera-to-world pose a view is compared with: its explicit ground truth, or
+/// else the middle of its ground-truth sub-frame poses (ExBluRF/E2NeRF-style
+/// `poses_bounds_subframes.npy`), i.e. the mid-exposure pose. With an even number of sub-frames
+/// it is halfway along the SE(3) geodesic between the two middle ones.
+fn gt_c2w(gt_pose: Option<&DataPose>, subframes: Option<&[DataPose]>) -> Option<Se3> {
+    if let Some(p) = gt_pose {
+        return Some(c2w_of(p));
+    }
+    let subs = subframes.filter(|s| !s.is_empty())?;
+    let n = subs.len();
+    if n % 2 == 1 {
+        return Some(c2w_of(&subs[n / 2]));
+    }
+    let (a, b) = (c2w_of(&subs[n / 2 - 1]), c2w_of(&subs[n / 2]));
+    Some(a.compose(&Se3::exp(&(a.inverse().compose(&b).log() * 0.5))))
+}
+
 fn read_points(model: &SparseModel) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
     let pts = model
         .points
@@ -200,7 +217,7 @@ pub fn prepare_input(
             img.data,
             intr,
             c2w_of(&pose),
-            v.gt_pose.as_ref().map(c2w_of),
+            gt_c2w(v.gt_pose.as_ref(), v.gt_subframe_poses.as_deref()),
         ));
     }
     if !unregistered.is_empty() {
@@ -329,4 +346,41 @@ pub fn prepare_input(
         scene_scale,
         init_label: mode.label(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pose_at(x: f64, yaw: f64) -> DataPose {
+        let c2w = Se3::exp(&Vector6::new(x, 0.0, 0.0, 0.0, yaw, 0.0));
+        let w2c = c2w.inverse();
+        let mut rotation = [[0.0; 3]; 3];
+        for (i, row) in rotation.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = w2c.rot[(i, j)];
+            }
+        }
+        DataPose {
+            rotation,
+            translation: [w2c.trans[0], w2c.trans[1], w2c.trans[2]],
+        }
+    }
+
+    #[test]
+    fn ground_truth_is_the_explicit_pose_else_the_mid_subframe() {
+        let explicit = pose_at(5.0, 0.0);
+        let odd: Vec<DataPose> = (0..5).map(|i| pose_at(0.1 * i as f64, 0.0)).collect();
+        let even: Vec<DataPose> = (0..4)
+            .map(|i| pose_at(0.1 * i as f64, 0.02 * i as f64))
+            .collect();
+        let centre = |s: Se3| s.trans;
+        assert!((centre(gt_c2w(Some(&explicit), Some(&odd)).unwrap())[0] - 5.0).abs() < 1e-12);
+        assert!((centre(gt_c2w(None, Some(&odd)).unwrap())[0] - 0.2).abs() < 1e-12);
+        // Even count: halfway between sub-frames 1 and 2 (x 0.15, yaw 0.03 on the geodesic).
+        let mid = gt_c2w(None, Some(&even)).unwrap();
+        let expect = Se3::exp(&Vector6::new(0.15, 0.0, 0.0, 0.0, 0.03, 0.0));
+        assert!((mid.inverse().compose(&expect)).log().norm() < 1e-9);
+        assert!(gt_c2w(None, Some(&[])).is_none() && gt_c2w(None, None).is_none());
+    }
 }
