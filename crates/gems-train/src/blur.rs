@@ -45,52 +45,7 @@ pub trait Rasterizer {
     ) -> Result<Gradients, TrainError>;
 }
 
-impl Rasterizer for gems_splat::Renderer {
-    fn render(
-        &mut self,
-        g: &Gaussians,
-        cams: &[Camera],
-        bgs: &[[f32; 3]],
-    ) -> Result<Vec<f32>, TrainError> {
-        Ok(self
-            .forward(g, cams, bgs, &gems_splat::RenderSettings::default())?
-            .rgb)
-    }
-
-    fn gradients(
-        &mut self,
-        g: &Gaussians,
-        cams: &[Camera],
-        bgs: &[[f32; 3]],
-        d_rgb: &[f32],
-    ) -> Result<Gradients, TrainError> {
-        Ok(self.backward(g, cams, bgs, d_rgb, None)?)
-    }
-}
-
-impl Rasterizer for gems_gpu::GpuRenderer {
-    fn render(
-        &mut self,
-        g: &Gaussians,
-        cams: &[Camera],
-        bgs: &[[f32; 3]],
-    ) -> Result<Vec<f32>, TrainError> {
-        Ok(self
-            .forward(g, cams, bgs, &gems_splat::RenderSettings::default())?
-            .rgb)
-    }
-
-    fn gradients(
-        &mut self,
-        g: &Gaussians,
-        cams: &[Camera],
-        bgs: &[[f32; 3]],
-        d_rgb: &[f32],
-    ) -> Result<Gradients, TrainError> {
-        Ok(self.backward(g, cams, bgs, d_rgb, None)?)
-    }
-}
-
+/// Both engines through [`crate::engine::Engine`], which dispatches to the one a run chose.
 impl Rasterizer for crate::engine::Engine {
     fn render(
         &mut self,
@@ -98,10 +53,9 @@ impl Rasterizer for crate::engine::Engine {
         cams: &[Camera],
         bgs: &[[f32; 3]],
     ) -> Result<Vec<f32>, TrainError> {
-        match self {
-            crate::engine::Engine::Cpu(r) => r.render(g, cams, bgs),
-            crate::engine::Engine::Gpu(r) => r.render(g, cams, bgs),
-        }
+        Ok(self
+            .forward(g, cams, bgs, &gems_splat::RenderSettings::default())?
+            .rgb)
     }
 
     fn gradients(
@@ -111,10 +65,7 @@ impl Rasterizer for crate::engine::Engine {
         bgs: &[[f32; 3]],
         d_rgb: &[f32],
     ) -> Result<Gradients, TrainError> {
-        match self {
-            crate::engine::Engine::Cpu(r) => r.gradients(g, cams, bgs, d_rgb),
-            crate::engine::Engine::Gpu(r) => r.gradients(g, cams, bgs, d_rgb),
-        }
+        self.backward(g, cams, bgs, d_rgb, None)
     }
 }
 
