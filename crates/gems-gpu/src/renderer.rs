@@ -637,24 +637,20 @@ impl GpuRenderer {
         if !sv.valid {
             return Err(SplatError::NoForward("no successful forward call".into()).into());
         }
-        if sv.num_gaussians != g.len()
-            || sv.num_cameras != cams.len()
-            || sv.width != width
-            || sv.height != height
-        {
-            return Err(SplatError::NoForward(format!(
-                "forward had {} Gaussians, {} cameras of {}x{}; backward got {}, {} of {}x{}",
-                sv.num_gaussians,
-                sv.num_cameras,
-                sv.width,
-                sv.height,
-                g.len(),
-                cams.len(),
-                width,
-                height
-            ))
-            .into());
-        }
+        gems_splat::check_same_batch(
+            gems_splat::BatchShape {
+                gaussians: sv.num_gaussians,
+                cameras: sv.num_cameras,
+                width: sv.width as usize,
+                height: sv.height as usize,
+            },
+            gems_splat::BatchShape {
+                gaussians: g.len(),
+                cameras: cams.len(),
+                width: width as usize,
+                height: height as usize,
+            },
+        )?;
         Ok(sv)
     }
 }

@@ -348,3 +348,31 @@ pub fn check_inputs(
     }
     Ok((first.width, first.height))
 }
+
+/// The shape of one render call: Gaussians, cameras, width and height.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BatchShape {
+    pub gaussians: usize,
+    pub cameras: usize,
+    pub width: usize,
+    pub height: usize,
+}
+
+/// Checks that a backward call has the shape of the forward it follows (both engines keep
+/// what backward needs from the last forward).
+pub fn check_same_batch(forward: BatchShape, backward: BatchShape) -> Result<(), SplatError> {
+    if forward == backward {
+        return Ok(());
+    }
+    Err(SplatError::NoForward(format!(
+        "forward had {} Gaussians, {} cameras of {}x{}; backward got {}, {} of {}x{}",
+        forward.gaussians,
+        forward.cameras,
+        forward.width,
+        forward.height,
+        backward.gaussians,
+        backward.cameras,
+        backward.width,
+        backward.height
+    )))
+}

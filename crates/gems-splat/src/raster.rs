@@ -345,23 +345,20 @@ impl Renderer {
             Some(s) if sv.valid => s,
             _ => return Err(SplatError::NoForward("no successful forward call".into())),
         };
-        if sv.num_gaussians != g.len()
-            || sv.num_cameras != cams.len()
-            || sv.width != width as usize
-            || sv.height != height as usize
-        {
-            return Err(SplatError::NoForward(format!(
-                "forward had {} Gaussians, {} cameras of {}x{}; backward got {}, {} of {}x{}",
-                sv.num_gaussians,
-                sv.num_cameras,
-                sv.width,
-                sv.height,
-                g.len(),
-                cams.len(),
-                width,
-                height
-            )));
-        }
+        crate::check_same_batch(
+            crate::BatchShape {
+                gaussians: sv.num_gaussians,
+                cameras: sv.num_cameras,
+                width: sv.width,
+                height: sv.height,
+            },
+            crate::BatchShape {
+                gaussians: g.len(),
+                cameras: cams.len(),
+                width: width as usize,
+                height: height as usize,
+            },
+        )?;
         let (n, nc, w, h) = (sv.num_gaussians, sv.num_cameras, sv.width, sv.height);
         let (tiles_x, tiles_y) = (sv.tiles_x, sv.tiles_y);
         let tiles = tiles_x * tiles_y;
