@@ -409,6 +409,7 @@ fn every_layout_every_command_leaves_the_scene_untouched() {
         t.frames.push(gems_data::nerfstudio::Frame {
             file_path: format!("images/{}", v.name),
             pose: v.gt_pose.unwrap(),
+            subframe_poses: Vec::new(),
             camera: gems_data::nerfstudio::CameraSpec::Pinhole(v.intrinsics.unwrap()),
             split: None,
         });
@@ -466,7 +467,51 @@ fn every_layout_every_command_leaves_the_scene_untouched() {
     .unwrap();
     gems_data::write_hold_marker(&ebad, 4).unwrap();
 
-    let scenes = [&gems_scene, &e2, &frames, &ns, &ex, &bad, &ebad];
+    // E2NeRF synthetic: transform_{train,test}.json (no file_path; lists of matrices along each
+    // exposure), train/r_<2i>.png blurry with the odd frames missing, test/r_<i>.png sharp.
+    let e2s = d.join("e2nerf_synthetic");
+    let mut train_t = gems_data::nerfstudio::Transforms::default();
+    let mut test_t = gems_data::nerfstudio::Transforms::default();
+    for v in &gt.views {
+        let subs = v.gt_subframe_poses.clone().unwrap();
+        let frame = |pose, subframe_poses| gems_data::nerfstudio::Frame {
+            file_path: String::new(),
+            pose,
+            subframe_poses,
+            camera: gems_data::nerfstudio::CameraSpec::Pinhole(v.intrinsics.unwrap()),
+            split: None,
+        };
+        if v.split == gems_data::Split::Train {
+            let i = 2 * train_t.frames.len();
+            std::fs::create_dir_all(e2s.join("train")).unwrap();
+            std::fs::copy(&v.image, e2s.join(format!("train/r_{i}.png"))).unwrap();
+            train_t
+                .frames
+                .push(frame(subs[subs.len() / 2], subs.clone()));
+            train_t.frames.push(frame(subs[subs.len() / 2], subs));
+        } else {
+            let i = test_t.frames.len();
+            std::fs::create_dir_all(e2s.join("test")).unwrap();
+            std::fs::copy(
+                v.sharp_gt.as_ref().unwrap(),
+                e2s.join(format!("test/r_{i}.png")),
+            )
+            .unwrap();
+            test_t
+                .frames
+                .push(frame(v.gt_pose.unwrap(), vec![v.gt_pose.unwrap(); 3]));
+        }
+    }
+    for (name, t) in [
+        ("transform_train.json", &train_t),
+        ("transform_test.json", &test_t),
+    ] {
+        let text = gems_data::nerfstudio::transforms_to_json(t).replace("\"file_path\": \"\",", "");
+        assert!(!text.contains("file_path"));
+        std::fs::write(e2s.join(name), text).unwrap();
+    }
+
+    let scenes = [&gems_scene, &e2, &frames, &ns, &ex, &bad, &ebad, &e2s];
     for sc in scenes {
         read_only(sc);
     }
@@ -532,7 +577,26 @@ fn every_layout_every_command_leaves_the_scene_untouched() {
             "--no-eval",
         ],
     ));
+    ok(&train(
+        &e2s,
+        &o("train_e2s"),
+        &["--init", "gt", "--steps", "5", "--no-eval"],
+    ));
+    ok(&gems(&[
+        "eval",
+        s(&o("train_e2s")),
+        "--scene",
+        s(&e2s),
+        "--refine-steps",
+        "2",
+    ]));
+    let metrics = std::fs::read_to_string(o("train_e2s").join("metrics.json")).unwrap();
+    assert!(
+        metrics.contains("\"nvs\": {") && metrics.contains("\"ape\": {"),
+        "{metrics}"
+    );
     for (sc, want) in [
+        (&e2s, "E2NeRF synthetic"),
         (&ex, "ExBluRF"),
         (&bad, "BAD-Gaussians / PRISM3D"),
         (&ebad, "EBAD-NeRF"),

@@ -6,6 +6,8 @@
 //! `camera_angle_x` (resolved against the image size by [`CameraSpec::resolve`]). Non-zero
 //! distortion (`k1..k4, p1, p2`) and non-pinhole `camera_model`s are rejected with an error.
 //! Optional `train_filenames` / `val_filenames` / `test_filenames` lists mark the split.
+//! E2NeRF's synthetic scenes store a list of matrices along the exposure per frame
+//! ([`Frame::subframe_poses`]).
 
 use std::path::Path;
 
@@ -59,8 +61,11 @@ pub enum FrameSplit {
 pub struct Frame {
     /// Image path as written in the file (relative to the file's folder).
     pub file_path: String,
-    /// World-to-camera pose, OpenCV axes.
+    /// World-to-camera pose, OpenCV axes (with [`Frame::subframe_poses`]: the middle one).
     pub pose: Pose,
+    /// Poses along the exposure in time order, when `transform_matrix` holds a list of matrices
+    /// (E2NeRF's synthetic scenes); empty for one matrix.
+    pub subframe_poses: Vec<Pose>,
     /// Intrinsics of this frame.
     pub camera: CameraSpec,
     /// Split, when the file lists one.
@@ -167,8 +172,91 @@ fn camera_of(
     Ok(parent.copied())
 }
 
-/// Parses the text of a transforms file.
+/// Parses the text of a transforms file (every frame must name its image in `file_path`).
 pub fn parse_transforms(text: &str) -> std::result::Result<Transforms, FormatError> {
+    parse_frames(text, None)
+}
+
+/// Parses a NeRF-Blender split file (`transforms_<split>.json`, E2NeRF's
+/// `transform_<split>.json`): a frame without `file_path` names `default_path(index)`.
+pub fn parse_split_transforms(
+    text: &str,
+    default_path: &dyn Fn(usize) -> String,
+) -> std::result::Result<Transforms, FormatError> {
+    parse_frames(text, Some(default_path))
+}
+
+/// One camera-to-world matrix (4×4, or 3×4 with the last row implied).
+fn matrix_of(rows: &[Value], what: &str) -> std::result::Result<[[f64; 4]; 4], FormatError> {
+    if rows.len() != 4 && rows.len() != 3 {
+        return Err(FormatError::new(format!(
+            "{what}: transform_matrix must be a 4×4 (or 3×4) array"
+        )));
+    }
+    let mut m = [
+        [0.0, 0.0, 0.0, 0.0],
+        [0.0; 4],
+        [0.0; 4],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    for (r, row) in rows.iter().enumerate() {
+        let vals = row.as_array().filter(|v| v.len() == 4).ok_or_else(|| {
+            FormatError::new(format!(
+                "{what}: transform_matrix row {r} must have 4 numbers"
+            ))
+        })?;
+        for (c, v) in vals.iter().enumerate() {
+            m[r][c] = v.as_f64().ok_or_else(|| {
+                FormatError::new(format!("{what}: transform_matrix has a non-number"))
+            })?;
+        }
+    }
+    let rot = [
+        [m[0][0], m[0][1], m[0][2]],
+        [m[1][0], m[1][1], m[1][2]],
+        [m[2][0], m[2][1], m[2][2]],
+    ];
+    let err = crate::pose::rotation_error(&rot);
+    if !m.iter().flatten().all(|v| v.is_finite()) || err.is_nan() || err > 1e-3 {
+        return Err(FormatError::new(format!(
+            "{what}: transform_matrix is not a finite rigid transform (rotation error {err:.2e})"
+        )));
+    }
+    Ok(m)
+}
+
+/// The poses of a frame's `transform_matrix`: one matrix, or (E2NeRF's synthetic scenes,
+/// `iCVTEAM/E2NeRF:load_blender.py`) a list of matrices along the exposure, in time order.
+fn poses_of(value: Option<&Value>, what: &str) -> std::result::Result<Vec<Pose>, FormatError> {
+    let rows = value
+        .and_then(Value::as_array)
+        .ok_or_else(|| FormatError::new(format!("{what}: missing transform_matrix array")))?;
+    let nested = rows
+        .first()
+        .and_then(Value::as_array)
+        .and_then(|r| r.first())
+        .is_some_and(Value::is_array);
+    if !nested {
+        return Ok(vec![pose_from_opengl_c2w(&matrix_of(rows, what)?)]);
+    }
+    rows.iter()
+        .enumerate()
+        .map(|(j, m)| {
+            let rows = m.as_array().ok_or_else(|| {
+                FormatError::new(format!("{what}: transform_matrix {j} is not an array"))
+            })?;
+            Ok(pose_from_opengl_c2w(&matrix_of(
+                rows,
+                &format!("{what}, matrix {j}"),
+            )?))
+        })
+        .collect()
+}
+
+fn parse_frames(
+    text: &str,
+    default_path: Option<&dyn Fn(usize) -> String>,
+) -> std::result::Result<Transforms, FormatError> {
     let root: Value =
         serde_json::from_str(text).map_err(|e| FormatError::new(format!("invalid JSON: {e}")))?;
     let obj = root
@@ -200,47 +288,15 @@ pub fn parse_transforms(text: &str) -> std::result::Result<Transforms, FormatErr
         let fo = f
             .as_object()
             .ok_or_else(|| FormatError::new(format!("{what} is not an object")))?;
-        let file_path = fo
-            .get("file_path")
-            .and_then(Value::as_str)
-            .ok_or_else(|| FormatError::new(format!("{what}: missing file_path")))?
-            .to_owned();
-        let rows = fo
-            .get("transform_matrix")
-            .and_then(Value::as_array)
-            .filter(|r| r.len() == 4 || r.len() == 3)
-            .ok_or_else(|| {
-                FormatError::new(format!(
-                    "{what}: transform_matrix must be a 4×4 (or 3×4) array"
-                ))
-            })?;
-        let mut m = [
-            [0.0, 0.0, 0.0, 0.0],
-            [0.0; 4],
-            [0.0; 4],
-            [0.0, 0.0, 0.0, 1.0],
-        ];
-        for (r, row) in rows.iter().enumerate() {
-            let vals = row.as_array().filter(|v| v.len() == 4).ok_or_else(|| {
-                FormatError::new(format!(
-                    "{what}: transform_matrix row {r} must have 4 numbers"
-                ))
-            })?;
-            for (c, v) in vals.iter().enumerate() {
-                m[r][c] = v.as_f64().ok_or_else(|| {
-                    FormatError::new(format!("{what}: transform_matrix has a non-number"))
-                })?;
-            }
-        }
-        let rot = [
-            [m[0][0], m[0][1], m[0][2]],
-            [m[1][0], m[1][1], m[1][2]],
-            [m[2][0], m[2][1], m[2][2]],
-        ];
-        let err = crate::pose::rotation_error(&rot);
-        if !m.iter().flatten().all(|v| v.is_finite()) || err.is_nan() || err > 1e-3 {
+        let file_path = match (fo.get("file_path").and_then(Value::as_str), default_path) {
+            (Some(p), _) => p.to_owned(),
+            (None, Some(default)) => default(i),
+            (None, None) => return Err(FormatError::new(format!("{what}: missing file_path"))),
+        };
+        let mut poses = poses_of(fo.get("transform_matrix"), &what)?;
+        if poses.is_empty() {
             return Err(FormatError::new(format!(
-                "{what}: transform_matrix is not a finite rigid transform (rotation error {err:.2e})"
+                "{what}: transform_matrix holds no matrix"
             )));
         }
         let camera = camera_of(fo, shared.as_ref(), &what)?.ok_or_else(|| {
@@ -255,9 +311,15 @@ pub fn parse_transforms(text: &str) -> std::result::Result<Transforms, FormatErr
         } else {
             None
         };
+        let (pose, subframe_poses) = if poses.len() == 1 {
+            (poses.remove(0), Vec::new())
+        } else {
+            (poses[poses.len() / 2], poses)
+        };
         out.push(Frame {
             file_path,
-            pose: pose_from_opengl_c2w(&m),
+            pose,
+            subframe_poses,
             camera,
             split,
         });
@@ -311,10 +373,13 @@ pub fn transforms_to_json(t: &Transforms) -> String {
                 cam_json(&f.camera)
             };
             m.insert("file_path".into(), json!(f.file_path));
-            m.insert(
-                "transform_matrix".into(),
-                json!(pose_to_opengl_c2w(&f.pose)),
-            );
+            let matrix = if f.subframe_poses.is_empty() {
+                json!(pose_to_opengl_c2w(&f.pose))
+            } else {
+                let all: Vec<_> = f.subframe_poses.iter().map(pose_to_opengl_c2w).collect();
+                json!(all)
+            };
+            m.insert("transform_matrix".into(), matrix);
             Value::Object(m)
         })
         .collect();

@@ -12,8 +12,18 @@
 //!    views get theirs as deblur ground truth, held-out views are evaluated on theirs) or one per
 //!    *training* image (BAD-Gaussians: held-out views then have no sharp image) — told apart by
 //!    count. Without `images_test/` every view is a training view (nothing to evaluate on).
-//! 2. **Nerfstudio** — `transforms.json`.
-//! 3. **Llff** — Deblur-NeRF / ExBluRF / E2NeRF / EBAD-NeRF: `poses_bounds.npy` (EBAD-NeRF:
+//! 2. **Blender** — NeRF-synthetic and E2NeRF's synthetic scenes: `transforms_train.json` /
+//!    `transforms_test.json` (E2NeRF: `transform_train.json` / `transform_test.json`) beside
+//!    `train/` and `test/`. Train frames are training views, test frames sharp novel views, in
+//!    file order. A frame without `file_path` is `<split>/r_<index>`; frames whose image is
+//!    missing are skipped (E2NeRF lists 200 train frames but ships the 100 even ones) and `gems
+//!    info` says so. E2NeRF's train frames hold a list of matrices along the exposure: they
+//!    become [`View::gt_subframe_poses`], the middle one (index `len / 2`) the starting and
+//!    ground-truth pose (the scenes are rendered, their poses exact); its sharp test
+//!    images are taken at matrix 1 of their list (`iCVTEAM/E2NeRF:load_blender.py`). View names
+//!    carry the split (`train_r_0.png`) because both splits reuse the same file names.
+//! 3. **Nerfstudio** — `transforms.json`.
+//! 4. **Llff** — Deblur-NeRF / ExBluRF / E2NeRF / EBAD-NeRF: `poses_bounds.npy` (EBAD-NeRF:
 //!    `pose_bounds.npy`) + `images/` holding blurry training images and sharp test images
 //!    interleaved: `i % llffhold == 0` is a sharp novel-view test image (hold from
 //!    [`OpenOptions::hold`], else `hold=` marker, else 8). EBAD-NeRF keeps the sharp images apart
@@ -22,7 +32,7 @@
 //!    `poses_bounds_subframes.npy` gives ground-truth sub-frame poses. A `sparse/0/` beside the
 //!    poses file (Deblur-NeRF real scenes as redistributed) gives poses, intrinsics and points;
 //!    the poses file is then read and checked against the images only ([`Scene::uses`] says so).
-//! 4. **Folder** — a plain folder of photos or video frames: every image a training view, no
+//! 5. **Folder** — a plain folder of photos or video frames: every image a training view, no
 //!    poses (the SfM makes them).
 //!
 //! [`Scene::dataset`] names the dataset a folder looks like, from the files each one ships.
@@ -61,7 +71,7 @@ use serde::Serialize;
 use crate::colmap::{self, SparseModel};
 use crate::error::{DataError, Result};
 use crate::events::{EventFiles, find_event_files};
-use crate::fsutil::list_images;
+use crate::fsutil::{list_images, read_text};
 use crate::image::{
     downscale_area, downscaled_size, image_dimensions, load_image, save_image_auto,
 };
@@ -79,6 +89,8 @@ pub const DEFAULT_HOLD: i64 = 8;
 pub enum Layout {
     /// GeMS / BAD-Gaussians / PRISM3D: `images/`, `images_test/`, `hold=`, `sparse/0/`.
     Gems,
+    /// NeRF-synthetic / E2NeRF synthetic: `transforms_{train,test}.json`, `train/`, `test/`.
+    Blender,
     /// Deblur-NeRF / ExBluRF: `poses_bounds.npy`, sharp test views interleaved in `images/`.
     Llff,
     /// nerfstudio `transforms.json`.
@@ -93,6 +105,9 @@ impl Layout {
         match self {
             Layout::Gems => "GeMS/BAD-Gaussians/PRISM3D (images/, images_test/, hold=, sparse/0)",
             Layout::Llff => "LLFF/Deblur-NeRF/ExBluRF (poses_bounds.npy, interleaved test views)",
+            Layout::Blender => {
+                "NeRF-Blender/E2NeRF synthetic (transforms_train.json, train/, test/)"
+            }
             Layout::Nerfstudio => "nerfstudio (transforms.json)",
             Layout::Folder => "a folder of photos or video frames (no poses)",
         }
@@ -101,15 +116,17 @@ impl Layout {
 
 impl std::str::FromStr for Layout {
     type Err = String;
-    /// Parses `gems`, `llff`, `nerfstudio` or `folder` (as accepted by `gems info --layout`).
+    /// Parses `gems`, `blender`, `llff`, `nerfstudio` or `folder` (as accepted by
+    /// `gems info --layout`).
     fn from_str(s: &str) -> std::result::Result<Self, String> {
         match s.to_ascii_lowercase().as_str() {
             "gems" | "bad" | "prism3d" => Ok(Layout::Gems),
             "llff" | "exblurf" | "deblurnerf" => Ok(Layout::Llff),
+            "blender" | "nerf-synthetic" | "e2nerf" => Ok(Layout::Blender),
             "nerfstudio" => Ok(Layout::Nerfstudio),
             "folder" | "photos" | "frames" => Ok(Layout::Folder),
             other => Err(format!(
-                "unknown layout {other:?} (expected gems, llff, nerfstudio or folder)"
+                "unknown layout {other:?} (expected gems, blender, llff, nerfstudio or folder)"
             )),
         }
     }
@@ -136,7 +153,7 @@ pub enum PoseSource {
     Sfm,
     /// `poses_bounds.npy` (estimated poses).
     Llff,
-    /// `transforms.json`.
+    /// `transforms.json`, or a NeRF-Blender scene's `transforms_<split>.json`.
     Nerfstudio,
 }
 
@@ -273,6 +290,8 @@ pub fn detect_layout(root: &Path) -> Result<Layout> {
     let has = |n: &str| root.join(n).exists();
     let layout = if has(crate::manifest::MANIFEST_FILE) || root.join("images_test").is_dir() {
         Layout::Gems
+    } else if blender_split_file(root, "train").is_some() {
+        Layout::Blender
     } else if has("transforms.json") {
         Layout::Nerfstudio
     } else if poses_file(root).is_some() {
@@ -306,6 +325,8 @@ fn identify(root: &Path, layout: Layout, events: &EventFiles) -> String {
         Layout::Gems if events.bin_counts.is_some() => "PRISM3D-E".into(),
         Layout::Gems if has("images_test") => "BAD-Gaussians / PRISM3D".into(),
         Layout::Gems => "GeMS / BAD-Gaussians / PRISM3D (no sharp images)".into(),
+        Layout::Blender if has("transform_train.json") => "E2NeRF synthetic".into(),
+        Layout::Blender => "NeRF-Blender synthetic".into(),
         Layout::Nerfstudio => "nerfstudio".into(),
         Layout::Folder => "photos or video frames".into(),
     }
@@ -341,6 +362,7 @@ fn open(root: &Path, opts: &OpenOptions, undistort: bool) -> Result<Scene> {
     let mut scene = match layout {
         Layout::Gems => open_gems(root, opts, &cache, hold, manifest.as_ref(), undistort)?,
         Layout::Llff => open_llff(root, opts, &cache, hold, undistort)?,
+        Layout::Blender => open_blender(root, opts, &cache)?,
         Layout::Nerfstudio => open_nerfstudio(root, opts, &cache)?,
         Layout::Folder => open_folder(root, opts, &cache)?,
     };
@@ -806,8 +828,7 @@ fn attach_prism3d_gt(views: &mut [View], sfm_dir: &Path) -> Result<()> {
         colmap::parse_images_bin(&crate::fsutil::read_bytes(&bin)?)
             .map_err(|e| DataError::from_format(&bin, e))?
     } else if txt.is_file() {
-        colmap::parse_images_txt(&crate::fsutil::read_text(&txt)?)
-            .map_err(|e| DataError::from_format(&txt, e))?
+        colmap::parse_images_txt(&read_text(&txt)?).map_err(|e| DataError::from_format(&txt, e))?
     } else {
         return Ok(());
     };
@@ -1088,23 +1109,116 @@ fn open_nerfstudio(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Sce
     }
     let mut frames = t.frames;
     frames.sort_by(|a, b| a.file_path.cmp(&b.file_path));
+    let views = views_from_frames(root, opts, cache, frames, &|_, p| file_name(p))?;
+    let mut scene = new_scene(root, Layout::Nerfstudio, opts, None, views);
+    scene.pose_source = PoseSource::Nerfstudio;
+    Ok(scene)
+}
+
+/// The split file of a NeRF-Blender scene: `transforms_<split>.json`, or E2NeRF's
+/// `transform_<split>.json`.
+fn blender_split_file(root: &Path, split: &str) -> Option<PathBuf> {
+    [
+        format!("transforms_{split}.json"),
+        format!("transform_{split}.json"),
+    ]
+    .into_iter()
+    .map(|n| root.join(n))
+    .find(|p| p.is_file())
+}
+
+/// The image a transforms frame names (NeRF-Blender files omit the ".png").
+fn frame_image(root: &Path, file_path: &str) -> PathBuf {
+    let mut p = root.join(file_path);
+    if !p.is_file() && p.extension().is_none() {
+        p.set_extension("png");
+    }
+    p
+}
+
+fn open_blender(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Scene> {
+    let mut frames = Vec::new();
+    let mut uses = Vec::new();
+    for (split_name, split) in [("train", FrameSplit::Train), ("test", FrameSplit::Eval)] {
+        let Some(path) = blender_split_file(root, split_name) else {
+            continue;
+        };
+        let t = nerfstudio::parse_split_transforms(&read_text(&path)?, &|i| {
+            format!("./{split_name}/r_{i}")
+        })
+        .map_err(|e| DataError::from_format(&path, e))?;
+        let total = t.frames.len();
+        let before = frames.len();
+        for mut f in t.frames {
+            if !frame_image(root, &f.file_path).is_file() {
+                continue;
+            }
+            f.split = Some(split);
+            if split == FrameSplit::Eval && !f.subframe_poses.is_empty() {
+                // A sharp test image has one pose: E2NeRF's loader takes matrix 1 of the list
+                // (iCVTEAM/E2NeRF:load_blender.py).
+                f.pose = f.subframe_poses[1.min(f.subframe_poses.len() - 1)];
+                f.subframe_poses.clear();
+            }
+            frames.push(f);
+        }
+        let kept = frames.len() - before;
+        if kept == 0 {
+            return Err(DataError::Missing {
+                path: root.join(split_name),
+                what: format!("images of the {total} frames in {}", path.display()),
+            });
+        }
+        let role = if kept < total {
+            format!(
+                "{split_name} views: {kept} of {total} frames have an image (the others are skipped)"
+            )
+        } else {
+            format!("{split_name} views ({kept} frames)")
+        };
+        uses.push(FileUse { path, role });
+    }
+    let mut views = views_from_frames(root, opts, cache, frames, &|f, p| {
+        let split = if f.split == Some(FrameSplit::Eval) {
+            "test"
+        } else {
+            "train"
+        };
+        format!("{split}_{}", file_name(p))
+    })?;
+    // Rendered scenes: their poses are exact, so they are also the ground truth (`--init gt`,
+    // APE). A train frame with a list of matrices is compared at its middle one.
+    for v in &mut views {
+        v.gt_pose = v.pose;
+    }
+    let mut scene = new_scene(root, Layout::Blender, opts, None, views);
+    scene.pose_source = PoseSource::Nerfstudio;
+    scene.uses.extend(uses);
+    Ok(scene)
+}
+
+/// Views of transforms frames in the given order; `name` names a view from its frame and image.
+fn views_from_frames(
+    root: &Path,
+    opts: &OpenOptions,
+    cache: &Cache,
+    frames: Vec<nerfstudio::Frame>,
+    name: &dyn Fn(&nerfstudio::Frame, &Path) -> String,
+) -> Result<Vec<View>> {
     let mut views = Vec::with_capacity(frames.len());
     // Downscaled folder per source folder: nerfstudio's own `images_<f>/` beside it, else a copy
     // in the cache.
     let mut scaled_dirs: std::collections::HashMap<PathBuf, PathBuf> = Default::default();
     for f in frames {
-        let mut p = root.join(&f.file_path);
-        if !p.is_file() && p.extension().is_none() {
-            // NeRF-Blender files omit the ".png".
-            p.set_extension("png");
-        }
+        let mut p = frame_image(root, &f.file_path);
         if !p.is_file() {
             return Err(DataError::Missing {
                 path: p,
-                what: format!("image of frame {:?} in {}", f.file_path, tpath.display()),
+                what: format!("image of frame {:?}", f.file_path),
             });
         }
-        let name = file_name(&p);
+        let file = file_name(&p);
+        let view_name = name(&f, &p);
         if opts.downscale > 1 {
             let parent = p.parent().unwrap_or(root).to_path_buf();
             let dst = match scaled_dirs.get(&parent) {
@@ -1130,7 +1244,7 @@ fn open_nerfstudio(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Sce
                     d
                 }
             };
-            let same = dst.join(&name);
+            let same = dst.join(&file);
             p = if same.is_file() {
                 same
             } else {
@@ -1139,7 +1253,7 @@ fn open_nerfstudio(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Sce
                     .find(|q| stem(q) == stem(&p))
                     .ok_or_else(|| DataError::Missing {
                         path: same,
-                        what: format!("downscaled copy of {name}"),
+                        what: format!("downscaled copy of {file}"),
                     })?
             };
         }
@@ -1148,15 +1262,16 @@ fn open_nerfstudio(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Sce
             Some(FrameSplit::Eval) => Split::NovelView,
             _ => Split::Train,
         };
-        let mut v = new_view(name, p.clone(), (w, h), split);
+        let mut v = new_view(view_name, p.clone(), (w, h), split);
         if split == Split::NovelView {
             v.sharp_gt = Some(p);
         }
         v.pose = Some(f.pose);
         v.intrinsics = Some(f.camera.resolve(w, h));
+        if !f.subframe_poses.is_empty() {
+            v.gt_subframe_poses = Some(f.subframe_poses);
+        }
         views.push(v);
     }
-    let mut scene = new_scene(root, Layout::Nerfstudio, opts, None, views);
-    scene.pose_source = PoseSource::Nerfstudio;
-    Ok(scene)
+    Ok(views)
 }

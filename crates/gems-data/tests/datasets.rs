@@ -402,3 +402,160 @@ fn exif_focal_in_pixels() {
         "{text}"
     );
 }
+
+/// E2NeRF's synthetic scenes (`iCVTEAM/E2NeRF:load_blender.py`): `transform_train.json` lists
+/// every rendered frame but only the even ones ship an image in `train/`; each train frame holds
+/// a list of matrices along the exposure and no `file_path`; sharp `test/` images are taken at
+/// matrix 1. Views keep the file order (r_10 after r_8, not after r_0).
+#[test]
+fn e2nerf_synthetic_scene_opens_in_file_order_with_subframes() {
+    use gems_data::nerfstudio::{CameraSpec, Frame, Transforms};
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("lego");
+    let (w, h) = (10u32, 8u32);
+    let sub = |i: usize| -> Vec<Pose> { (0..5).map(|j| pose(10 * i + j)).collect() };
+    let frames = |n: usize, split: &str| -> Transforms {
+        Transforms {
+            frames: (0..n)
+                .map(|i| Frame {
+                    file_path: format!("./{split}/r_{i}"),
+                    pose: sub(i)[2],
+                    subframe_poses: sub(i),
+                    camera: CameraSpec::FovX(0.69),
+                    split: None,
+                })
+                .collect(),
+        }
+    };
+    for i in (0..12).step_by(2) {
+        write_img(&root.join(format!("train/r_{i}.png")), w, h, i);
+    }
+    for i in 0..3 {
+        write_img(&root.join(format!("test/r_{i}.png")), w, h, 100 + i);
+    }
+    for (split, n) in [("train", 12), ("test", 3)] {
+        let path = root.join(format!("transform_{split}.json"));
+        nerfstudio::write_transforms(&path, &frames(n, split)).unwrap();
+        // E2NeRF's files name no image: the loader makes `<split>/r_<i>.png` itself.
+        let mut json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        for f in json["frames"].as_array_mut().unwrap() {
+            f.as_object_mut().unwrap().remove("file_path");
+        }
+        std::fs::write(&path, json.to_string()).unwrap();
+    }
+    let before = snapshot(&root);
+    let s = open_scene(&root, &OpenOptions::default()).unwrap();
+    assert_eq!(
+        (s.layout, s.dataset.as_str()),
+        (Layout::Blender, "E2NeRF synthetic")
+    );
+    let names: Vec<&str> = s.views.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "train_r_0.png",
+            "train_r_2.png",
+            "train_r_4.png",
+            "train_r_6.png",
+            "train_r_8.png",
+            "train_r_10.png",
+            "test_r_0.png",
+            "test_r_1.png",
+            "test_r_2.png"
+        ]
+    );
+    let close = |a: &Pose, b: &Pose| {
+        a.center()
+            .iter()
+            .zip(b.center())
+            .all(|(x, y)| (x - y).abs() < 1e-9)
+    };
+    // Train view r_10: the middle of its five exposure matrices starts it; all five are its
+    // ground-truth sub-frames.
+    let v = &s.views[5];
+    assert_eq!(v.split, Split::Train);
+    assert!(close(v.pose.as_ref().unwrap(), &pose(102)));
+    let subs = v.gt_subframe_poses.as_ref().unwrap();
+    assert_eq!(subs.len(), 5);
+    assert!(close(&subs[4], &pose(104)));
+    assert!(v.sharp_gt.is_none());
+    // Test view r_1: sharp, at matrix 1 of its list.
+    let t = &s.views[7];
+    assert_eq!(t.split, Split::NovelView);
+    assert_eq!(
+        t.sharp_gt.as_deref(),
+        Some(root.join("test/r_1.png").as_path())
+    );
+    assert!(close(t.pose.as_ref().unwrap(), &pose(11)));
+    assert!(t.gt_subframe_poses.is_none());
+    let k = t.intrinsics.unwrap();
+    assert!((k.fx - 0.5 * 10.0 / (0.5f64 * 0.69).tan()).abs() < 1e-9);
+    assert!(
+        s.uses
+            .iter()
+            .any(|u| u.role.contains("6 of 12 frames have an image")),
+        "{:?}",
+        s.uses
+    );
+    assert_eq!(s.nvs_eval_views().count(), 3);
+    // Downscaled: copies of train/ and test/ go to the cache, never into the scene.
+    let cache = dir.path().join("cache");
+    let s2 = open_scene(
+        &root,
+        &OpenOptions {
+            downscale: 2,
+            cache_dir: Some(cache.clone()),
+            ..OpenOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!((s2.views[0].width, s2.views[0].height), (5, 4));
+    assert!(s2.views.iter().all(|v| v.image.starts_with(&cache)));
+    assert_eq!(s2.views[6].name, "test_r_0.png");
+    assert_eq!(snapshot(&root), before);
+}
+
+/// The NeRF-synthetic layout itself: `transforms_{train,test}.json` with `file_path` and one
+/// matrix per frame; a train frame whose image is missing is skipped, a split with none is an
+/// error naming the folder.
+#[test]
+fn nerf_synthetic_scene_opens_and_a_split_without_images_is_an_error() {
+    use gems_data::nerfstudio::{CameraSpec, Frame, Transforms};
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("chair");
+    let t = |split: &str, n: usize| Transforms {
+        frames: (0..n)
+            .map(|i| Frame {
+                file_path: format!("./{split}/r_{i}"),
+                pose: pose(i),
+                subframe_poses: Vec::new(),
+                camera: CameraSpec::FovX(0.69),
+                split: None,
+            })
+            .collect(),
+    };
+    for i in 0..3 {
+        write_img(&root.join(format!("train/r_{i}.png")), 6, 4, i);
+    }
+    nerfstudio::write_transforms(&root.join("transforms_train.json"), &t("train", 4)).unwrap();
+    nerfstudio::write_transforms(&root.join("transforms_test.json"), &t("test", 2)).unwrap();
+    let e = open_scene(&root, &OpenOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("test") && e.contains("2 frames"), "{e}");
+    for i in 0..2 {
+        write_img(&root.join(format!("test/r_{i}.png")), 6, 4, 9 + i);
+    }
+    let s = open_scene(&root, &OpenOptions::default()).unwrap();
+    assert_eq!(
+        (s.layout, s.dataset.as_str()),
+        (Layout::Blender, "NeRF-Blender synthetic")
+    );
+    assert_eq!(
+        (s.train_views().count(), s.nvs_eval_views().count()),
+        (3, 2)
+    );
+    assert!(s.views[0].gt_subframe_poses.is_none());
+    assert_eq!("blender".parse::<Layout>(), Ok(Layout::Blender));
+}

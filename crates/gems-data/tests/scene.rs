@@ -492,6 +492,7 @@ fn nerfstudio_round_trip_and_scene() {
         .map(|i| Frame {
             file_path: format!("images/{i:03}.png"),
             pose: pose(i),
+            subframe_poses: Vec::new(),
             camera: CameraSpec::Pinhole(k),
             split: Some(if i == 2 {
                 FrameSplit::Eval
