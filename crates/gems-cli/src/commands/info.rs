@@ -34,7 +34,7 @@ pub struct Args {
     /// Hold-out interval overriding the scene's `hold=<n>` marker (n < 1: no hold-out).
     #[arg(long)]
     pub hold: Option<i64>,
-    /// Force the layout: gems, llff, nerfstudio or folder (default: detect).
+    /// Force the layout: gems, blender, llff, nerfstudio or folder (default: detect).
     #[arg(long)]
     pub layout: Option<Layout>,
     /// Do not read the event stream (only report which event files exist).
