@@ -294,25 +294,10 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         .map(|im| Gray::from_rgb(&im.image))
         .collect();
     check_identical(images, &grays)?;
-
-    // The working size where the blur is about TARGET_BLUR_PX is tried first, then the others by
-    // distance (in scale) from it: too fine a level leaves long smears that bias matching and let
-    // the camera path bend, too coarse a level leaves too few pixels.
-    let mut blurs: Vec<f32> = grays.par_iter().map(features::estimate_blur_px).collect();
-    blurs.sort_by(|a, b| a.total_cmp(b));
-    let blur = blurs[blurs.len() / 2] as f64;
-    let target_ws = if blur > 0.0 {
-        long * TARGET_BLUR_PX / blur
-    } else {
-        f64::INFINITY
-    };
-    let mut sizes = opts.working_sizes.clone();
-    sizes.sort_by(|&a, &b| {
-        let d = |s: u32| (s as f64 / target_ws).ln().abs();
-        d(a).total_cmp(&d(b)).then(b.cmp(&a))
-    });
+    let (blur, sizes) = working_sizes_by_blur(&grays, long, opts);
     tracing::info!(blur_px = blur, working_sizes = ?sizes, "estimated motion blur");
-    let mut best: Option<(incremental::Recon, u32, f64)> = None;
+
+    let mut best: Option<Attempt> = None;
     let mut attempts: Vec<Attempt> = Vec::new();
     let mut t_feat = 0.0;
     let mut t_rec = 0.0;
@@ -325,27 +310,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         let (tracks, corrs) = all_tracks(&work, &feats, &pairs, opts);
         t_feat += tf.elapsed().as_secs_f64();
         if textureless.is_none() {
-            // A view with (almost) no keypoints at every level is textureless; it stays
-            // unregistered, and the run fails when fewer than two views have texture.
-            let names: Vec<String> = feats
-                .iter()
-                .enumerate()
-                .filter(|(k, f)| {
-                    f.xy.len() < 8
-                        && opts.working_sizes.iter().all(|&s| {
-                            let sc = features::exact_scale(w, s as f64 / long) as f32;
-                            extract_one(&grays[*k], sc, opts).xy.len() < 8
-                        })
-                })
-                .map(|(k, _)| images[k].name.clone())
-                .collect();
-            if images.len() - names.len() < 2 {
-                return Err(SfmError::Textureless(names));
-            }
-            if !names.is_empty() {
-                tracing::warn!(?names, "textureless views cannot be registered");
-            }
-            textureless = Some(names);
+            textureless = Some(textureless_views(images, &grays, &feats, long, opts)?);
         }
         let tr = Instant::now();
         let focals: Vec<f64> = match opts.focal_px {
@@ -365,56 +330,50 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
             };
             let rec = incremental::reconstruct(tracks.clone(), &corrs, images.len(), k, opts);
             let Some(rec) = rec else { continue };
-            let nreg = rec.registered();
-            let err = rec.mean_error() / scale;
+            let attempt = Attempt {
+                error_px: rec.mean_error() / scale,
+                focal_start_px: f / scale,
+                recon: rec,
+                working_size: ws,
+                scale,
+            };
             tracing::info!(
                 working_size = ws,
-                focal_start = f / scale,
-                focal = rec.k.f / scale,
-                registered = nreg,
-                error_px = err,
+                focal_start = attempt.focal_start_px,
+                focal = attempt.recon.k.f / scale,
+                registered = attempt.recon.registered(),
+                error_px = attempt.error_px,
                 "sfm attempt"
             );
-            attempts.push((rec, ws, scale, err, f / scale));
+            attempts.push(attempt);
         }
-        best = choose_attempt(&attempts, long);
+        best = choose_attempt(&attempts, long).cloned();
         t_rec += tr.elapsed().as_secs_f64();
         if best
             .as_ref()
-            .is_some_and(|b| b.0.registered() == images.len())
+            .is_some_and(|b| b.recon.registered() == images.len())
         {
             break;
         }
     }
-    let Some((mut rec, ws, scale)) = best else {
+    let Some(Attempt {
+        recon: mut rec,
+        working_size: ws,
+        scale,
+        ..
+    }) = best
+    else {
         return Err(SfmError::TooFewRegistered {
             registered: 0,
             total: images.len(),
             unregistered: images.iter().map(|i| i.name.clone()).collect(),
         });
     };
-    if opts.focal_px.is_none() {
-        // Bracket: halfway (geometrically) to the neighbouring candidates of the winner.
-        let f0 = rec.k.f;
-        let mut c: Vec<f64> = opts
-            .focal_candidates
-            .iter()
-            .map(|c| c * long * scale)
-            .collect();
-        c.sort_by(|a, b| a.total_cmp(b));
-        let lo = c
-            .iter()
-            .rev()
-            .find(|&&x| x < f0 * 0.999)
-            .map_or(f0 * 0.8, |x| (x * f0).sqrt());
-        let hi = c
-            .iter()
-            .find(|&&x| x > f0 * 1.001)
-            .map_or(f0 * 1.25, |x| (x * f0).sqrt());
-        if let Some(r) = incremental::refine_focal_bounded(&rec, lo, hi, opts) {
-            tracing::info!(focal = r.k.f / scale, "focal refined");
-            rec = r;
-        }
+    if opts.focal_px.is_none()
+        && let Some(r) = refine_focal_around(&rec, long * scale, opts)
+    {
+        tracing::info!(focal = r.k.f / scale, "focal refined");
+        rec = r;
     }
     let mut result = output::assemble(images, &rec, scale, opts.focal_px.is_some(), ws);
     result.stats.seconds = t0.elapsed().as_secs_f64();
@@ -431,9 +390,98 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     Ok(result)
 }
 
-/// A reconstruction with its working size, scale, mean error (full-resolution px) and the
-/// focal it started from (full-resolution px).
-type Attempt = (incremental::Recon, u32, f64, f64, f64);
+/// The median motion-blur length (px at full size) and the working sizes in the order to try:
+/// the size where the blur is about [`TARGET_BLUR_PX`] first, then the others by distance (in
+/// scale) from it. Too fine a level leaves long smears that bias matching and let the camera
+/// path bend, too coarse a level leaves too few pixels.
+fn working_sizes_by_blur(grays: &[Gray], long: f64, opts: &SfmOptions) -> (f64, Vec<u32>) {
+    let mut blurs: Vec<f32> = grays.par_iter().map(features::estimate_blur_px).collect();
+    blurs.sort_by(|a, b| a.total_cmp(b));
+    let blur = blurs[blurs.len() / 2] as f64;
+    let target_ws = if blur > 0.0 {
+        long * TARGET_BLUR_PX / blur
+    } else {
+        f64::INFINITY
+    };
+    let mut sizes = opts.working_sizes.clone();
+    sizes.sort_by(|&a, &b| {
+        let d = |s: u32| (s as f64 / target_ws).ln().abs();
+        d(a).total_cmp(&d(b)).then(b.cmp(&a))
+    });
+    (blur, sizes)
+}
+
+/// Fewer keypoints than this at every working size make a view textureless.
+const TEXTURELESS_KEYPOINTS: usize = 8;
+
+/// The names of the textureless views (too few keypoints at every level, see
+/// [`TEXTURELESS_KEYPOINTS`]): they stay unregistered, and the run fails when fewer than two
+/// views have texture.
+fn textureless_views(
+    images: &[SfmImage],
+    grays: &[Gray],
+    feats: &[Features],
+    long: f64,
+    opts: &SfmOptions,
+) -> Result<Vec<String>, SfmError> {
+    let (w, _) = images[0].image.dimensions();
+    let names: Vec<String> = feats
+        .iter()
+        .enumerate()
+        .filter(|(k, f)| {
+            f.xy.len() < TEXTURELESS_KEYPOINTS
+                && opts.working_sizes.iter().all(|&s| {
+                    let sc = features::exact_scale(w, s as f64 / long) as f32;
+                    extract_one(&grays[*k], sc, opts).xy.len() < TEXTURELESS_KEYPOINTS
+                })
+        })
+        .map(|(k, _)| images[k].name.clone())
+        .collect();
+    if images.len() - names.len() < 2 {
+        return Err(SfmError::Textureless(names));
+    }
+    if !names.is_empty() {
+        tracing::warn!(?names, "textureless views cannot be registered");
+    }
+    Ok(names)
+}
+
+/// Refines the focal of `rec` within a bracket halfway (geometrically) to the neighbouring focal
+/// candidates of its own (`long_px`: the long image side at the working scale); `None` when the
+/// refinement does not improve it.
+fn refine_focal_around(
+    rec: &incremental::Recon,
+    long_px: f64,
+    opts: &SfmOptions,
+) -> Option<incremental::Recon> {
+    let f0 = rec.k.f;
+    let mut c: Vec<f64> = opts.focal_candidates.iter().map(|c| c * long_px).collect();
+    c.sort_by(|a, b| a.total_cmp(b));
+    let lo = c
+        .iter()
+        .rev()
+        .find(|&&x| x < f0 * 0.999)
+        .map_or(f0 * 0.8, |x| (x * f0).sqrt());
+    let hi = c
+        .iter()
+        .find(|&&x| x > f0 * 1.001)
+        .map_or(f0 * 1.25, |x| (x * f0).sqrt());
+    incremental::refine_focal_bounded(rec, lo, hi, opts)
+}
+
+/// One reconstruction attempt: a working size and a starting focal.
+#[derive(Clone)]
+struct Attempt {
+    recon: incremental::Recon,
+    /// Long image side the features were found at.
+    working_size: u32,
+    /// Working size over full size.
+    scale: f64,
+    /// Mean reprojection error in full-resolution px.
+    error_px: f64,
+    /// The focal the attempt started from, in full-resolution px.
+    focal_start_px: f64,
+}
 
 /// Relative spread of mean reprojection errors within which focal candidates count as equally
 /// good. Under heavy blur the error barely depends on the focal (±1 % over a ×3 range), so the
@@ -444,22 +492,26 @@ const FOCAL_ERROR_TIE: f64 = 0.01;
 /// breaks ties between equally good focal candidates.
 const FOCAL_PRIOR: f64 = 1.0;
 
-/// The best attempt so far: most registered views; among those, errors within [`FOCAL_ERROR_TIE`] of the smallest are ties, and the tie
-/// whose starting focal is nearest [`FOCAL_PRIOR`] wins.
-fn choose_attempt(attempts: &[Attempt], long: f64) -> Option<(incremental::Recon, u32, f64)> {
-    let nreg = attempts.iter().map(|a| a.0.registered()).max()?;
+/// The best attempt so far: most registered views; among those, errors within
+/// [`FOCAL_ERROR_TIE`] of the smallest are ties, and the tie whose starting focal is nearest
+/// [`FOCAL_PRIOR`] wins.
+fn choose_attempt(attempts: &[Attempt], long: f64) -> Option<&Attempt> {
+    let nreg = attempts.iter().map(|a| a.recon.registered()).max()?;
     let min_err = attempts
         .iter()
-        .filter(|a| a.0.registered() == nreg)
-        .map(|a| a.3)
+        .filter(|a| a.recon.registered() == nreg)
+        .map(|a| a.error_px)
         .fold(f64::INFINITY, f64::min);
     let prior = FOCAL_PRIOR * long;
     let dist = |f: f64| (f / prior).ln().abs();
     attempts
         .iter()
-        .filter(|a| a.0.registered() == nreg && a.3 <= min_err * (1.0 + FOCAL_ERROR_TIE))
-        .min_by(|a, b| dist(a.4).total_cmp(&dist(b.4)).then(a.3.total_cmp(&b.3)))
-        .map(|a| (a.0.clone(), a.1, a.2))
+        .filter(|a| a.recon.registered() == nreg && a.error_px <= min_err * (1.0 + FOCAL_ERROR_TIE))
+        .min_by(|a, b| {
+            dist(a.focal_start_px)
+                .total_cmp(&dist(b.focal_start_px))
+                .then(a.error_px.total_cmp(&b.error_px))
+        })
 }
 
 fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
