@@ -657,27 +657,10 @@ fn all_tracks(
 ) -> (Vec<incremental::Track>, Vec<PairCorr>) {
     let n = work.len();
     let mut tracks = incremental::build_tracks(feats, pairs);
-    let mut corr: std::collections::BTreeMap<(usize, usize), PairCorr> =
-        std::collections::BTreeMap::new();
-    let mut add_corr =
-        |i: usize, j: usize, a: nalgebra::Vector2<f64>, b: nalgebra::Vector2<f64>| {
-            let (key, a, b) = if i < j {
-                ((i, j), a, b)
-            } else {
-                ((j, i), b, a)
-            };
-            let e = corr.entry(key).or_insert_with(|| PairCorr {
-                i: key.0,
-                j: key.1,
-                x1: Vec::new(),
-                x2: Vec::new(),
-            });
-            e.x1.push(a);
-            e.x2.push(b);
-        };
+    let mut corr = Correspondences::default();
     for pm in pairs {
         for &(a, b) in &pm.matches {
-            add_corr(
+            corr.add(
                 pm.i,
                 pm.j,
                 to_v(feats[pm.i].xy[a as usize]),
@@ -697,26 +680,16 @@ fn all_tracks(
     };
     let smooth: Vec<tracking::Prepared> = work
         .par_iter()
-        .map(|g| tracking::Prepared::new(g.gaussian(1.5)))
+        .map(|g| tracking::Prepared::new(g.gaussian(TRACKING_SMOOTH_SIGMA)))
         .collect();
     let ov = tracking::overlaps(work, work[0].w);
     for i in 0..n {
-        let mut nb: Vec<usize> = (0..n).filter(|&j| j != i && ov[i][j].score > 0.2).collect();
+        let mut nb: Vec<usize> = (0..n)
+            .filter(|&j| j != i && ov[i][j].score > MIN_OVERLAP_SCORE)
+            .collect();
         nb.sort_by(|&a, &b| ov[i][b].score.total_cmp(&ov[i][a].score).then(a.cmp(&b)));
         nb.truncate(tp.neighbours);
-        // Keypoints come strongest-first per grid cell; beyond the budget they are dropped.
-        let mut pts = feats[i].xy.clone();
-        pts.truncate(opts.max_query_points);
-        // Grid points stand in for corners that blur has wiped out; where corners are plentiful
-        // they only add less precisely localised patches.
-        if opts.grid_spacing_frac > 0.0 && pts.len() < opts.max_query_points / 3 {
-            let spacing = ((wl * opts.grid_spacing_frac).round() as usize).max(2);
-            let budget = opts.max_query_points.saturating_sub(pts.len());
-            let grid =
-                tracking::grid_points(&smooth[i].img, tp.half, spacing, 0.1, 0.2, &pts, budget);
-            pts.extend(grid);
-        }
-        let pts = &pts;
+        let pts = query_points(&feats[i], &smooth[i], wl, &tp, opts);
         let mut root: Vec<incremental::Track> = pts
             .iter()
             .map(|p| incremental::Track {
@@ -729,65 +702,151 @@ fn all_tracks(
             })
             .collect();
         for &j in &nb {
-            // Chained prediction: each point is searched for from the view of its track that
-            // overlaps j best (a near neighbour of j rather than the root), so tracks reach views
-            // whose shift from the root is beyond the search radius and stay long, which is what
-            // ties distant views together and keeps the camera path from bending.
-            let mut found: Vec<Option<[f32; 2]>> = vec![None; pts.len()];
-            let mut by_src: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
-            for (k, t) in root.iter().enumerate() {
-                let src = t
-                    .obs
-                    .iter()
-                    .map(|o| o.view)
-                    .max_by(|&a, &b| ov[a][j].score.total_cmp(&ov[b][j].score).then(b.cmp(&a)))
-                    .expect("root observation");
-                by_src.entry(src).or_default().push(k);
-            }
-            for (src, ks) in by_src {
-                let from: Vec<[f32; 2]> = ks
-                    .iter()
-                    .map(|&k| {
-                        let o = root[k].obs.iter().find(|o| o.view == src).expect("source");
-                        [o.xy.x as f32, o.xy.y as f32]
-                    })
-                    .collect();
-                let f =
-                    tracking::track_points(&smooth[src], &smooth[j], &from, ov[src][j].shift, &tp);
-                for (&k, q) in ks.iter().zip(f) {
-                    found[k] = q;
-                }
-            }
-            let idx: Vec<usize> = (0..pts.len()).filter(|&k| found[k].is_some()).collect();
-            if idx.len() < opts.min_pair_inliers {
-                continue;
-            }
-            let x1: Vec<_> = idx.iter().map(|&k| to_v(pts[k])).collect();
-            let x2: Vec<_> = idx
-                .iter()
-                .map(|&k| to_v(found[k].expect("tracked")))
-                .collect();
-            let seed = opts.seed ^ 0x5eed ^ ((i as u64) << 32 | j as u64);
-            let Some((_, mask)) =
-                geometry::ransac_epipolar(&x1, &x2, false, opts.max_reproj_px, 1000, seed)
-            else {
-                continue;
-            };
-            if mask.iter().filter(|&&m| m).count() < opts.min_pair_inliers {
-                continue;
-            }
-            for ((&k, m), (a, b)) in idx.iter().zip(&mask).zip(x1.iter().zip(&x2)) {
-                if *m {
-                    root[k].obs.push(incremental::TrackObs {
-                        view: j,
-                        xy: *b,
-                        active: true,
-                    });
-                    add_corr(i, j, *a, *b);
-                }
+            let found = chained_track(&root, j, &smooth, &ov, &tp);
+            for (k, a, b) in epipolar_inliers(&pts, &found, i, j, opts) {
+                root[k].obs.push(incremental::TrackObs {
+                    view: j,
+                    xy: b,
+                    active: true,
+                });
+                corr.add(i, j, a, b);
             }
         }
         tracks.extend(root.into_iter().filter(|t| t.obs.len() >= 2));
     }
-    (tracks, corr.into_values().collect())
+    (tracks, corr.0.into_values().collect())
+}
+
+/// Views overlapping less than this (the overlap score of [`tracking::overlaps`]) are not
+/// tracked into.
+const MIN_OVERLAP_SCORE: f32 = 0.2;
+
+/// σ (working-level px) of the Gaussian smoothing applied before patch tracking.
+const TRACKING_SMOOTH_SIGMA: f32 = 1.5;
+
+/// RANSAC iterations of the epipolar check on each tracked pair.
+const TRACKED_PAIR_RANSAC_ITERS: usize = 1000;
+
+/// Point correspondences per image pair `(i < j)`, in pair order.
+#[derive(Default)]
+struct Correspondences(std::collections::BTreeMap<(usize, usize), PairCorr>);
+
+impl Correspondences {
+    /// Adds the match of `a` in view `i` with `b` in view `j` (either order).
+    fn add(&mut self, i: usize, j: usize, a: nalgebra::Vector2<f64>, b: nalgebra::Vector2<f64>) {
+        let (key, a, b) = if i < j {
+            ((i, j), a, b)
+        } else {
+            ((j, i), b, a)
+        };
+        let e = self.0.entry(key).or_insert_with(|| PairCorr {
+            i: key.0,
+            j: key.1,
+            x1: Vec::new(),
+            x2: Vec::new(),
+        });
+        e.x1.push(a);
+        e.x2.push(b);
+    }
+}
+
+/// The points of one view to track into its neighbours: its keypoints (strongest first per grid
+/// cell; beyond the budget they are dropped), topped up with grid points where blur has wiped
+/// out corners. Where corners are plentiful grid points would only add less precisely localised
+/// patches, so they are added only below a third of the budget.
+fn query_points(
+    feats: &Features,
+    smooth: &tracking::Prepared,
+    wl: f32,
+    tp: &tracking::TrackParams,
+    opts: &SfmOptions,
+) -> Vec<[f32; 2]> {
+    let mut pts = feats.xy.clone();
+    pts.truncate(opts.max_query_points);
+    if opts.grid_spacing_frac > 0.0 && pts.len() < opts.max_query_points / 3 {
+        let spacing = ((wl * opts.grid_spacing_frac).round() as usize).max(2);
+        let budget = opts.max_query_points.saturating_sub(pts.len());
+        let grid = tracking::grid_points(&smooth.img, tp.half, spacing, 0.1, 0.2, &pts, budget);
+        pts.extend(grid);
+    }
+    pts
+}
+
+/// Where each track of `root` lands in view `j` (`None`: lost). Chained prediction: each point
+/// is searched for from the view of its track that overlaps j best (a near neighbour of j rather
+/// than the root), so tracks reach views whose shift from the root is beyond the search radius
+/// and stay long, which is what ties distant views together and keeps the camera path from
+/// bending.
+fn chained_track(
+    root: &[incremental::Track],
+    j: usize,
+    smooth: &[tracking::Prepared],
+    ov: &[Vec<tracking::Overlap>],
+    tp: &tracking::TrackParams,
+) -> Vec<Option<[f32; 2]>> {
+    let mut found: Vec<Option<[f32; 2]>> = vec![None; root.len()];
+    let mut by_src: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for (k, t) in root.iter().enumerate() {
+        let src = t
+            .obs
+            .iter()
+            .map(|o| o.view)
+            .max_by(|&a, &b| ov[a][j].score.total_cmp(&ov[b][j].score).then(b.cmp(&a)))
+            .expect("root observation");
+        by_src.entry(src).or_default().push(k);
+    }
+    for (src, ks) in by_src {
+        let from: Vec<[f32; 2]> = ks
+            .iter()
+            .map(|&k| {
+                let o = root[k].obs.iter().find(|o| o.view == src).expect("source");
+                [o.xy.x as f32, o.xy.y as f32]
+            })
+            .collect();
+        let f = tracking::track_points(&smooth[src], &smooth[j], &from, ov[src][j].shift, tp);
+        for (&k, q) in ks.iter().zip(f) {
+            found[k] = q;
+        }
+    }
+    found
+}
+
+/// The tracked points from view `i` to view `j` that pass an epipolar RANSAC check, as (query
+/// index, point in i, point in j); empty when fewer than `min_pair_inliers` survive.
+fn epipolar_inliers(
+    pts: &[[f32; 2]],
+    found: &[Option<[f32; 2]>],
+    i: usize,
+    j: usize,
+    opts: &SfmOptions,
+) -> Vec<(usize, nalgebra::Vector2<f64>, nalgebra::Vector2<f64>)> {
+    let idx: Vec<usize> = (0..pts.len()).filter(|&k| found[k].is_some()).collect();
+    if idx.len() < opts.min_pair_inliers {
+        return Vec::new();
+    }
+    let x1: Vec<_> = idx.iter().map(|&k| to_v(pts[k])).collect();
+    let x2: Vec<_> = idx
+        .iter()
+        .map(|&k| to_v(found[k].expect("tracked")))
+        .collect();
+    let seed = opts.seed ^ 0x5eed ^ ((i as u64) << 32 | j as u64);
+    let Some((_, mask)) = geometry::ransac_epipolar(
+        &x1,
+        &x2,
+        false,
+        opts.max_reproj_px,
+        TRACKED_PAIR_RANSAC_ITERS,
+        seed,
+    ) else {
+        return Vec::new();
+    };
+    if mask.iter().filter(|&&m| m).count() < opts.min_pair_inliers {
+        return Vec::new();
+    }
+    idx.iter()
+        .zip(&mask)
+        .zip(x1.iter().zip(&x2))
+        .filter(|((_, m), _)| **m)
+        .map(|((&k, _), (a, b))| (k, *a, *b))
+        .collect()
 }
