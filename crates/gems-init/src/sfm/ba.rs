@@ -88,15 +88,6 @@ pub fn total_cost(
         .sum()
 }
 
-/// Partial Schur sums of one chunk of points: reduced matrix and vector, and per point the
-/// inverse damped 3×3 block (None when singular) and the point gradient.
-type ChunkSums = (
-    DMatrix<f64>,
-    DVector<f64>,
-    Vec<Option<Matrix3<f64>>>,
-    Vec<Vector3<f64>>,
-);
-
 /// Per-observation Jacobians and residual. Camera block columns: ω (3), v (3), f (1).
 struct Lin {
     jc: SMatrix<f64, 2, 7>,
@@ -146,45 +137,12 @@ pub fn bundle_adjust(
     k: &mut Intrinsics,
     opts: &BaOptions,
 ) -> BaSummary {
-    let ncam = poses.len();
-    // Parameter layout: free cameras with observations get 6 columns each, then the focal.
-    let mut cam_col = vec![usize::MAX; ncam];
-    let mut seen = vec![false; ncam];
-    for o in obs {
-        seen[o.cam] = true;
-    }
-    let mut n = 0;
-    for c in 0..ncam {
-        if seen[c] && !fixed[c] {
-            cam_col[c] = n;
-            n += 6;
-        }
-    }
-    let focal_col = if opts.refine_focal { Some(n) } else { None };
-    if opts.refine_focal {
-        n += 1;
-    }
-    // Observations grouped by point (CSR).
-    let npts = points.len();
-    let mut start = vec![0usize; npts + 1];
-    for o in obs {
-        start[o.point + 1] += 1;
-    }
-    for i in 0..npts {
-        start[i + 1] += start[i];
-    }
-    let mut order = vec![0usize; obs.len()];
-    let mut fill = start.clone();
-    for (i, o) in obs.iter().enumerate() {
-        order[fill[o.point]] = i;
-        fill[o.point] += 1;
-    }
-
+    let layout = ParamLayout::new(poses.len(), fixed, obs, opts.refine_focal);
+    let by_point = PointObservations::new(points.len(), obs);
     let initial_cost = total_cost(poses, points, obs, k, opts.huber_px);
     let mut cost = initial_cost;
     let mut lambda = 1e-3;
     let mut iterations = 0;
-    const CHUNK: usize = 256;
 
     for _ in 0..opts.max_iters {
         iterations += 1;
@@ -193,102 +151,16 @@ pub fn bundle_adjust(
             .par_iter()
             .map(|o| linearise(&poses[o.cam], &points[o.point], &o.xy, k, opts.huber_px))
             .collect();
-        // Columns of an observation's 7 camera-side parameters in the reduced system.
-        let cols = |o: &Observation| -> [Option<usize>; 7] {
-            let mut c = [None; 7];
-            if cam_col[o.cam] != usize::MAX {
-                for (i, ci) in c.iter_mut().take(6).enumerate() {
-                    *ci = Some(cam_col[o.cam] + i);
-                }
-            }
-            c[6] = focal_col;
-            c
-        };
         let mut accepted = false;
         for _attempt in 0..8 {
-            // Per-point 3×3 blocks with damping; Schur complement into S, b.
-            let chunks: Vec<ChunkSums> = (0..npts.div_ceil(CHUNK))
-                .into_par_iter()
-                .map(|ch| {
-                    let mut s = DMatrix::<f64>::zeros(n, n);
-                    let mut b = DVector::<f64>::zeros(n);
-                    let mut vinv = Vec::with_capacity(CHUNK);
-                    let mut gps = Vec::with_capacity(CHUNK);
-                    let mut wblocks: Vec<(usize, SMatrix<f64, 7, 3>)> = Vec::new();
-                    for p in ch * CHUNK..((ch + 1) * CHUNK).min(npts) {
-                        let mut v = Matrix3::<f64>::zeros();
-                        let mut gp = Vector3::<f64>::zeros();
-                        wblocks.clear();
-                        for &oi in &order[start[p]..start[p + 1]] {
-                            let Some(l) = &lins[oi] else { continue };
-                            let o = &obs[oi];
-                            v += l.jp.transpose() * l.jp * l.w;
-                            gp += l.jp.transpose() * l.r * l.w;
-                            let c = cols(o);
-                            let u = l.jc.transpose() * l.jc * l.w;
-                            let gc = l.jc.transpose() * l.r * l.w;
-                            for a in 0..7 {
-                                let Some(ca) = c[a] else { continue };
-                                b[ca] += gc[a];
-                                for bb in 0..7 {
-                                    if let Some(cb) = c[bb] {
-                                        s[(ca, cb)] += u[(a, bb)];
-                                    }
-                                }
-                            }
-                            wblocks.push((oi, l.jc.transpose() * l.jp * l.w));
-                        }
-                        for i in 0..3 {
-                            v[(i, i)] += lambda * (v[(i, i)] + 1e-9);
-                        }
-                        let vi = v.try_inverse();
-                        if let Some(vi) = vi {
-                            // S −= W V⁻¹ Wᵀ ; b −= W V⁻¹ g_p
-                            for (oa, wa) in &wblocks {
-                                let ca = cols(&obs[*oa]);
-                                let wv = wa * vi;
-                                let bv = wv * gp;
-                                for a in 0..7 {
-                                    if let Some(x) = ca[a] {
-                                        b[x] -= bv[a];
-                                    }
-                                }
-                                for (ob, wb) in &wblocks {
-                                    let cb = cols(&obs[*ob]);
-                                    let m = wv * wb.transpose();
-                                    for a in 0..7 {
-                                        let Some(x) = ca[a] else { continue };
-                                        for bb in 0..7 {
-                                            if let Some(y) = cb[bb] {
-                                                s[(x, y)] -= m[(a, bb)];
-                                            }
-                                        }
-                                    }
-                                }
-                            }
-                        }
-                        vinv.push(vi);
-                        gps.push(gp);
-                    }
-                    (s, b, vinv, gps)
-                })
-                .collect();
-            let mut s = DMatrix::<f64>::zeros(n, n);
-            let mut b = DVector::<f64>::zeros(n);
-            let mut vinv = Vec::with_capacity(npts);
-            let mut gps = Vec::with_capacity(npts);
-            for (cs, cb, cv, cg) in chunks {
-                s += cs;
-                b += cb;
-                vinv.extend(cv);
-                gps.extend(cg);
-            }
+            let mut system = schur_system(&lins, obs, &layout, &by_point, lambda);
+            let n = layout.n;
             for i in 0..n {
-                s[(i, i)] += lambda * (s[(i, i)] + 1e-9);
+                system.s[(i, i)] += lambda * (system.s[(i, i)] + 1e-9);
             }
             let dc = if n > 0 {
-                match s.clone().cholesky() {
-                    Some(ch) => ch.solve(&(-&b)),
+                match system.s.clone().cholesky() {
+                    Some(ch) => ch.solve(&(-&system.b)),
                     None => {
                         lambda *= 10.0;
                         continue;
@@ -297,30 +169,10 @@ pub fn bundle_adjust(
             } else {
                 DVector::zeros(0)
             };
-            // Back-substitute the points: δp = V⁻¹(−g_p − Wᵀ δc).
-            let dps: Vec<Vector3<f64>> = (0..npts)
-                .into_par_iter()
-                .map(|p| {
-                    let Some(vi) = vinv[p] else {
-                        return Vector3::zeros();
-                    };
-                    let mut rhs = -gps[p];
-                    for &oi in &order[start[p]..start[p + 1]] {
-                        let Some(l) = &lins[oi] else { continue };
-                        let c = cols(&obs[oi]);
-                        let w = l.jc.transpose() * l.jp * l.w;
-                        for (a, ca) in c.iter().enumerate() {
-                            if let Some(x) = ca {
-                                rhs -= w.row(a).transpose() * dc[*x];
-                            }
-                        }
-                    }
-                    vi * rhs
-                })
-                .collect();
+            let dps = back_substitute(&system, &dc, &lins, obs, &layout, &by_point);
             let mut new_poses = poses.to_vec();
             for (c, np) in new_poses.iter_mut().enumerate() {
-                let col = cam_col[c];
+                let col = layout.cam_col[c];
                 if col == usize::MAX {
                     continue;
                 }
@@ -331,7 +183,7 @@ pub fn bundle_adjust(
             let new_points: Vec<Vector3<f64>> =
                 points.iter().zip(&dps).map(|(x, d)| x + d).collect();
             let mut new_k = *k;
-            if let Some(fc) = focal_col {
+            if let Some(fc) = layout.focal_col {
                 new_k.f += dc[fc];
             }
             let new_cost = if new_k.f > 0.0 {
@@ -367,6 +219,224 @@ pub fn bundle_adjust(
         final_cost: cost,
         iterations,
     }
+}
+
+/// Columns of the reduced (camera and focal) system: free cameras with observations get 6
+/// columns each (ω, v), then the focal when it is refined.
+struct ParamLayout {
+    /// First column of each camera; `usize::MAX` for a fixed or unobserved camera.
+    cam_col: Vec<usize>,
+    focal_col: Option<usize>,
+    /// Number of columns.
+    n: usize,
+}
+
+impl ParamLayout {
+    fn new(ncam: usize, fixed: &[bool], obs: &[Observation], refine_focal: bool) -> Self {
+        let mut cam_col = vec![usize::MAX; ncam];
+        let mut seen = vec![false; ncam];
+        for o in obs {
+            seen[o.cam] = true;
+        }
+        let mut n = 0;
+        for c in 0..ncam {
+            if seen[c] && !fixed[c] {
+                cam_col[c] = n;
+                n += 6;
+            }
+        }
+        let focal_col = refine_focal.then_some(n);
+        if refine_focal {
+            n += 1;
+        }
+        ParamLayout {
+            cam_col,
+            focal_col,
+            n,
+        }
+    }
+
+    /// Columns of an observation's 7 camera-side parameters (ω, v, f) in the reduced system.
+    fn cols(&self, o: &Observation) -> [Option<usize>; 7] {
+        let mut c = [None; 7];
+        if self.cam_col[o.cam] != usize::MAX {
+            for (i, ci) in c.iter_mut().take(6).enumerate() {
+                *ci = Some(self.cam_col[o.cam] + i);
+            }
+        }
+        c[6] = self.focal_col;
+        c
+    }
+}
+
+/// Observations grouped by point (CSR): those of point `p` are
+/// `order[start[p]..start[p + 1]]`.
+struct PointObservations {
+    start: Vec<usize>,
+    order: Vec<usize>,
+}
+
+impl PointObservations {
+    fn new(npts: usize, obs: &[Observation]) -> Self {
+        let mut start = vec![0usize; npts + 1];
+        for o in obs {
+            start[o.point + 1] += 1;
+        }
+        for i in 0..npts {
+            start[i + 1] += start[i];
+        }
+        let mut order = vec![0usize; obs.len()];
+        let mut fill = start.clone();
+        for (i, o) in obs.iter().enumerate() {
+            order[fill[o.point]] = i;
+            fill[o.point] += 1;
+        }
+        PointObservations { start, order }
+    }
+
+    fn of(&self, p: usize) -> &[usize] {
+        &self.order[self.start[p]..self.start[p + 1]]
+    }
+
+    fn points(&self) -> usize {
+        self.start.len() - 1
+    }
+}
+
+/// The reduced camera system after eliminating the points (Schur complement), before the
+/// damping of its diagonal: `s · δc = −b`. Per point, the inverse damped 3×3 block (`None` when
+/// singular) and the point gradient, for the back-substitution.
+struct SchurSystem {
+    s: DMatrix<f64>,
+    b: DVector<f64>,
+    vinv: Vec<Option<Matrix3<f64>>>,
+    gps: Vec<Vector3<f64>>,
+}
+
+/// Points per parallel chunk of the Schur complement; the chunk sums are added in chunk order,
+/// so the result does not depend on the thread count.
+const SCHUR_CHUNK: usize = 256;
+
+/// Builds the point blocks with damping `lambda` and folds them into the reduced system.
+fn schur_system(
+    lins: &[Option<Lin>],
+    obs: &[Observation],
+    layout: &ParamLayout,
+    by_point: &PointObservations,
+    lambda: f64,
+) -> SchurSystem {
+    let n = layout.n;
+    let npts = by_point.points();
+    let chunks: Vec<SchurSystem> = (0..npts.div_ceil(SCHUR_CHUNK))
+        .into_par_iter()
+        .map(|ch| {
+            let mut s = DMatrix::<f64>::zeros(n, n);
+            let mut b = DVector::<f64>::zeros(n);
+            let mut vinv = Vec::with_capacity(SCHUR_CHUNK);
+            let mut gps = Vec::with_capacity(SCHUR_CHUNK);
+            let mut wblocks: Vec<(usize, SMatrix<f64, 7, 3>)> = Vec::new();
+            for p in ch * SCHUR_CHUNK..((ch + 1) * SCHUR_CHUNK).min(npts) {
+                let mut v = Matrix3::<f64>::zeros();
+                let mut gp = Vector3::<f64>::zeros();
+                wblocks.clear();
+                for &oi in by_point.of(p) {
+                    let Some(l) = &lins[oi] else { continue };
+                    let o = &obs[oi];
+                    v += l.jp.transpose() * l.jp * l.w;
+                    gp += l.jp.transpose() * l.r * l.w;
+                    let c = layout.cols(o);
+                    let u = l.jc.transpose() * l.jc * l.w;
+                    let gc = l.jc.transpose() * l.r * l.w;
+                    for a in 0..7 {
+                        let Some(ca) = c[a] else { continue };
+                        b[ca] += gc[a];
+                        for bb in 0..7 {
+                            if let Some(cb) = c[bb] {
+                                s[(ca, cb)] += u[(a, bb)];
+                            }
+                        }
+                    }
+                    wblocks.push((oi, l.jc.transpose() * l.jp * l.w));
+                }
+                for i in 0..3 {
+                    v[(i, i)] += lambda * (v[(i, i)] + 1e-9);
+                }
+                let vi = v.try_inverse();
+                if let Some(vi) = vi {
+                    // S −= W V⁻¹ Wᵀ ; b −= W V⁻¹ g_p
+                    for (oa, wa) in &wblocks {
+                        let ca = layout.cols(&obs[*oa]);
+                        let wv = wa * vi;
+                        let bv = wv * gp;
+                        for a in 0..7 {
+                            if let Some(x) = ca[a] {
+                                b[x] -= bv[a];
+                            }
+                        }
+                        for (ob, wb) in &wblocks {
+                            let cb = layout.cols(&obs[*ob]);
+                            let m = wv * wb.transpose();
+                            for a in 0..7 {
+                                let Some(x) = ca[a] else { continue };
+                                for bb in 0..7 {
+                                    if let Some(y) = cb[bb] {
+                                        s[(x, y)] -= m[(a, bb)];
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                vinv.push(vi);
+                gps.push(gp);
+            }
+            SchurSystem { s, b, vinv, gps }
+        })
+        .collect();
+    let mut total = SchurSystem {
+        s: DMatrix::<f64>::zeros(n, n),
+        b: DVector::<f64>::zeros(n),
+        vinv: Vec::with_capacity(npts),
+        gps: Vec::with_capacity(npts),
+    };
+    for c in chunks {
+        total.s += c.s;
+        total.b += c.b;
+        total.vinv.extend(c.vinv);
+        total.gps.extend(c.gps);
+    }
+    total
+}
+
+/// Back-substitutes the points: δp = V⁻¹(−g_p − Wᵀ δc).
+fn back_substitute(
+    system: &SchurSystem,
+    dc: &DVector<f64>,
+    lins: &[Option<Lin>],
+    obs: &[Observation],
+    layout: &ParamLayout,
+    by_point: &PointObservations,
+) -> Vec<Vector3<f64>> {
+    (0..by_point.points())
+        .into_par_iter()
+        .map(|p| {
+            let Some(vi) = system.vinv[p] else {
+                return Vector3::zeros();
+            };
+            let mut rhs = -system.gps[p];
+            for &oi in by_point.of(p) {
+                let Some(l) = &lins[oi] else { continue };
+                let c = layout.cols(&obs[oi]);
+                let w = l.jc.transpose() * l.jp * l.w;
+                for (a, ca) in c.iter().enumerate() {
+                    if let Some(x) = ca {
+                        rhs -= w.row(a).transpose() * dc[*x];
+                    }
+                }
+            }
+            vi * rhs
+        })
+        .collect()
 }
 
 #[cfg(test)]
