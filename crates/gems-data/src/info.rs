@@ -279,6 +279,15 @@ impl fmt::Display for SceneInfo {
         for u in &self.uses {
             writeln!(f, "uses       {}: {}", u.path.display(), u.role)?;
         }
+        self.fmt_views(f)?;
+        self.fmt_poses(f)?;
+        self.fmt_events(f)
+    }
+}
+
+impl SceneInfo {
+    /// Views, splits, resolution and intrinsics.
+    fn fmt_views(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let hold = self
             .hold
             .map_or("none".to_owned(), |h| format!("every {h}th view held out"));
@@ -326,10 +335,18 @@ impl fmt::Display for SceneInfo {
                 )?,
             },
         }
+        Ok(())
+    }
+
+    /// Pose sources, ground truth, sharp images, the SfM model and the manifest.
+    fn fmt_poses(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let src = match self.pose_source {
             PoseSource::None => "none (run `gems sfm` first)",
             PoseSource::Sfm => "SfM model",
             PoseSource::Llff => "poses_bounds.npy (estimated)",
+            PoseSource::Nerfstudio if self.layout == Layout::Blender => {
+                "transforms_<split>.json (rendered: exact)"
+            }
             PoseSource::Nerfstudio => "transforms.json",
         };
         writeln!(
@@ -340,10 +357,13 @@ impl fmt::Display for SceneInfo {
         writeln!(
             f,
             "gt poses   {}",
-            if self.has_gt_poses {
-                "yes (mid-exposure, from poses_bounds.npy declared ground truth)"
-            } else {
-                "no"
+            match (self.has_gt_poses, self.layout) {
+                (false, _) => "no",
+                (true, Layout::Blender) => "yes (mid-exposure, the rendered scene's own poses)",
+                (true, Layout::Llff) => {
+                    "yes (mid-exposure, from poses_bounds.npy declared ground truth)"
+                }
+                (true, _) => "yes (mid-exposure)",
             }
         )?;
         match self.subframes_per_view {
@@ -373,6 +393,11 @@ impl fmt::Display for SceneInfo {
                 m.generator, m.poses
             )?;
         }
+        Ok(())
+    }
+
+    /// Event stream, bins and exposure windows.
+    fn fmt_events(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.events {
             None => writeln!(f, "events     none")?,
             Some(e) => {
