@@ -251,15 +251,7 @@ fn write_scene(
     let cfg = &scene.config;
     let k = &scene.intrinsics;
     let n = scene.views.len();
-    for sub in ["images", "images_test"] {
-        let d = dir.join(sub);
-        std::fs::create_dir_all(&d).map_err(|e| SynthError::io(&d, e))?;
-    }
-    for (i, r) in renders.iter().enumerate() {
-        let name = image_name(i, n);
-        write_png(&dir.join("images").join(&name), &r.blurry)?;
-        write_png(&dir.join("images_test").join(&name), &r.sharp)?;
-    }
+    write_images(renders, dir)?;
     write_hold_marker(dir, i64::from(cfg.hold))?;
     let manifest = Manifest {
         description: Some(format!(
@@ -273,26 +265,7 @@ fn write_scene(
         ..Manifest::ground_truth(concat!("gems synth ", env!("CARGO_PKG_VERSION")))
     };
     write_manifest(dir, &manifest)?;
-
-    let rows: Vec<LlffRow> = scene
-        .views
-        .iter()
-        .map(|v| llff_row(&v.mid, k, v.near, v.far))
-        .collect();
-    write_poses_bounds(&dir.join("poses_bounds.npy"), &rows)?;
-    let sub_rows: Vec<Vec<LlffRow>> = scene
-        .views
-        .iter()
-        .zip(subframe_poses)
-        .map(|(v, poses)| {
-            poses
-                .iter()
-                .map(|p| llff_row(p, k, v.near, v.far))
-                .collect()
-        })
-        .collect();
-    write_subframes(&dir.join("poses_bounds_subframes.npy"), &sub_rows)?;
-
+    write_poses(scene, subframe_poses, dir)?;
     let gt_sparse = dir.join("gt").join("sparse").join("0");
     std::fs::create_dir_all(&gt_sparse).map_err(|e| SynthError::io(&gt_sparse, e))?;
     write_model(
@@ -300,31 +273,11 @@ fn write_scene(
         &ground_truth_model(scene, renders),
         ModelFormat::Binary,
     )?;
-
-    let mut n_events = 0;
-    if cfg.events.is_some() {
-        let mut all: Option<EventStream> = None;
-        for r in renders {
-            if let Some(ev) = &r.events {
-                match all.as_mut() {
-                    Some(a) => a.append(ev.clone())?,
-                    None => all = Some(ev.clone()),
-                }
-            }
-        }
-        if let Some(all) = all {
-            n_events = all.len();
-            write_events_npz(&dir.join("events.npz"), &all)?;
-        }
-        let (starts, ends): (Vec<String>, Vec<String>) = (0..n)
-            .map(|v| {
-                let (s, e) = scene.exposure_window_us(v);
-                (format!("{s}\n"), format!("{e}\n"))
-            })
-            .unzip();
-        write_text(&dir.join("exposure_start_ts.txt"), &starts.concat())?;
-        write_text(&dir.join("exposure_end_ts.txt"), &ends.concat())?;
-    }
+    let n_events = if cfg.events.is_some() {
+        write_events(scene, renders, dir)?
+    } else {
+        0
+    };
 
     let summary = SynthSummary {
         out_dir: final_dir.to_path_buf(),
@@ -361,6 +314,81 @@ fn write_scene(
         n_events
     );
     Ok(summary)
+}
+
+/// The blurry images to `images/`, their sharp mid-exposure frames to `images_test/`.
+fn write_images(renders: &[ViewRender], dir: &Path) -> Result<(), SynthError> {
+    for sub in ["images", "images_test"] {
+        let d = dir.join(sub);
+        std::fs::create_dir_all(&d).map_err(|e| SynthError::io(&d, e))?;
+    }
+    for (i, r) in renders.iter().enumerate() {
+        let name = image_name(i, renders.len());
+        write_png(&dir.join("images").join(&name), &r.blurry)?;
+        write_png(&dir.join("images_test").join(&name), &r.sharp)?;
+    }
+    Ok(())
+}
+
+/// Mid-exposure poses to `poses_bounds.npy`, the sub-frame poses to
+/// `poses_bounds_subframes.npy` (ExBluRF's layout).
+fn write_poses(
+    scene: &SynthScene,
+    subframe_poses: &[Vec<CameraPose>],
+    dir: &Path,
+) -> Result<(), SynthError> {
+    let k = &scene.intrinsics;
+    let rows: Vec<LlffRow> = scene
+        .views
+        .iter()
+        .map(|v| llff_row(&v.mid, k, v.near, v.far))
+        .collect();
+    write_poses_bounds(&dir.join("poses_bounds.npy"), &rows)?;
+    let sub_rows: Vec<Vec<LlffRow>> = scene
+        .views
+        .iter()
+        .zip(subframe_poses)
+        .map(|(v, poses)| {
+            poses
+                .iter()
+                .map(|p| llff_row(p, k, v.near, v.far))
+                .collect()
+        })
+        .collect();
+    write_subframes(&dir.join("poses_bounds_subframes.npy"), &sub_rows)?;
+    Ok(())
+}
+
+/// Every view's events as one stream (`events.npz`) and the exposure windows
+/// (`exposure_start_ts.txt` / `exposure_end_ts.txt`, µs); returns the number of events.
+fn write_events(
+    scene: &SynthScene,
+    renders: &[ViewRender],
+    dir: &Path,
+) -> Result<usize, SynthError> {
+    let mut n_events = 0;
+    let mut all: Option<EventStream> = None;
+    for r in renders {
+        if let Some(ev) = &r.events {
+            match all.as_mut() {
+                Some(a) => a.append(ev.clone())?,
+                None => all = Some(ev.clone()),
+            }
+        }
+    }
+    if let Some(all) = all {
+        n_events = all.len();
+        write_events_npz(&dir.join("events.npz"), &all)?;
+    }
+    let (starts, ends): (Vec<String>, Vec<String>) = (0..scene.views.len())
+        .map(|v| {
+            let (s, e) = scene.exposure_window_us(v);
+            (format!("{s}\n"), format!("{e}\n"))
+        })
+        .unzip();
+    write_text(&dir.join("exposure_start_ts.txt"), &starts.concat())?;
+    write_text(&dir.join("exposure_end_ts.txt"), &ends.concat())?;
+    Ok(n_events)
 }
 
 /// Ground-truth COLMAP model: one PINHOLE camera, every view at its mid-exposure pose, and the
