@@ -252,14 +252,6 @@ impl Simulator {
         &self.events
     }
 
-    /// Removes and returns the events emitted so far (the state is kept, so feeding continues).
-    pub fn take_events(&mut self) -> EventStream {
-        std::mem::replace(
-            &mut self.events,
-            EventStream::empty(self.width, self.height),
-        )
-    }
-
     /// Ends the simulation and returns every event.
     pub fn finish(self) -> EventStream {
         self.events

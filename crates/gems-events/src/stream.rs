@@ -166,10 +166,6 @@ impl EventStream {
         self.p.extend_from_slice(&other.p);
         Ok(())
     }
-    /// Consumes the stream and returns its columns `(t, x, y, p)`.
-    pub fn into_columns(self) -> (Vec<i64>, Vec<u16>, Vec<u16>, Vec<i8>) {
-        (self.t, self.x, self.y, self.p)
-    }
 }
 
 /// A borrowed, time-sorted window of an [`EventStream`] (same invariants, no copy).
@@ -227,17 +223,6 @@ impl<'a> EventSlice<'a> {
             x: &self.x[a..b],
             y: &self.y[a..b],
             p: &self.p[a..b],
-        }
-    }
-    /// Copies the window into an owned stream.
-    pub fn to_stream(&self) -> EventStream {
-        EventStream {
-            width: self.width,
-            height: self.height,
-            t: self.t.to_vec(),
-            x: self.x.to_vec(),
-            y: self.y.to_vec(),
-            p: self.p.to_vec(),
         }
     }
     /// Signed per-pixel event counts in `bins` equal bins over `[t0, t1]`, bin k holding events

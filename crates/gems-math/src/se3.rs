@@ -41,10 +41,6 @@ impl Se3 {
         Se3 { rot, trans }
     }
 
-    pub fn from_parts(rot: So3, trans: Vector3<f64>) -> Self {
-        Se3 { rot: rot.0, trans }
-    }
-
     pub fn rotation(&self) -> So3 {
         So3(self.rot)
     }

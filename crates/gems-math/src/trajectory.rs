@@ -120,15 +120,6 @@ impl Trajectory {
         }
     }
 
-    /// Mutable knots, for an optimiser updating them in place.
-    pub fn knots_mut(&mut self) -> &mut [[f64; 6]] {
-        match self {
-            Trajectory::Bezier(k) => k,
-            Trajectory::Linear(k) => k,
-            Trajectory::CubicBSpline(k) => k,
-        }
-    }
-
     pub fn num_knots(&self) -> usize {
         self.knots().len()
     }
