@@ -26,7 +26,9 @@ struct Params {
     num_blocks: u32,
     seg_len: u32,
     seg_width: u32,
-    pad0: u32,
+    // project_backward: bit 0 loads the per-Gaussian accumulators of the previous camera chunk
+    // from `carry`, bit 1 stores them there (see project_backward.wgsl).
+    carry: u32,
     pad1: u32,
 }
 

@@ -3,6 +3,13 @@
 // quaternion and the log-scales. Writes the Gaussian's gradients (packed like its parameters),
 // its densification statistics, and each camera's share of the pose gradient
 // (`pose_parts[c·N + i]`: dL/dR row-major, dL/dt), which reduce_segments sums per camera.
+//
+// Camera chunks: a batch too large for the adapter's bindings runs as consecutive calls over
+// chunks of its cameras. The per-Gaussian sums over cameras (mean, covariance, opacity, SH,
+// statistics) then continue across calls through `carry` (CARRY floats per Gaussian):
+// `params.carry` bit 0 starts from the previous chunk's sums, bit 1 stores the sums reached.
+// The additions happen in the same order as in one call over all cameras, so the chunked
+// result is bit-identical to the unchunked one.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> gaussians: array<f32>;
@@ -12,6 +19,11 @@
 @group(0) @binding(5) var<storage, read_write> grads_out: array<f32>;
 @group(0) @binding(6) var<storage, read_write> stats: array<vec2<f32>>;
 @group(0) @binding(7) var<storage, read_write> pose_parts: array<f32>;
+@group(0) @binding(8) var<storage, read_write> carry: array<f32>;
+
+// Accumulators carried between camera chunks: mean 3, covariance 9, opacity logit 1, SH 48,
+// mean2d-gradient norm 1, visible count 1 (bits).
+const CARRY: u32 = 63u;
 
 // Element (row a, column b) of a WGSL (column-major) matrix.
 fn el(m: mat3x3<f32>, a: u32, b: u32) -> f32 {
@@ -46,6 +58,19 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     var v_sh: array<vec3<f32>, 16>;
     var norm = 0.0;
     var count = 0u;
+    let cb = i * CARRY;
+    if (params.carry & 1u) != 0u {
+        v_mean_acc = vec3<f32>(carry[cb], carry[cb + 1u], carry[cb + 2u]);
+        for (var col = 0u; col < 3u; col++) {
+            v_cov_acc[col] = vec3<f32>(carry[cb + 3u + 3u * col], carry[cb + 4u + 3u * col], carry[cb + 5u + 3u * col]);
+        }
+        v_logit = carry[cb + 12u];
+        for (var k = 0u; k < 16u; k++) {
+            v_sh[k] = vec3<f32>(carry[cb + 13u + 3u * k], carry[cb + 14u + 3u * k], carry[cb + 15u + 3u * k]);
+        }
+        norm = carry[cb + 61u];
+        count = bitcast<u32>(carry[cb + 62u]);
+    }
     for (var c = 0u; c < params.num_cameras; c++) {
         let ci = c * n + i;
         var v_r = mat3x3<f32>();
@@ -168,6 +193,25 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             }
             pose_parts[pb + 9u + a] = v_t[a];
         }
+    }
+
+    if (params.carry & 2u) != 0u {
+        for (var a = 0u; a < 3u; a++) {
+            carry[cb + a] = v_mean_acc[a];
+        }
+        for (var col = 0u; col < 3u; col++) {
+            for (var a = 0u; a < 3u; a++) {
+                carry[cb + 3u + 3u * col + a] = v_cov_acc[col][a];
+            }
+        }
+        carry[cb + 12u] = v_logit;
+        for (var k = 0u; k < 16u; k++) {
+            for (var ch = 0u; ch < 3u; ch++) {
+                carry[cb + 13u + 3u * k + ch] = v_sh[k][ch];
+            }
+        }
+        carry[cb + 61u] = norm;
+        carry[cb + 62u] = bitcast<f32>(count);
     }
 
     // Covariance → raw quaternion and log-scales (Σ = M Mᵀ, M = Rq S).

@@ -51,7 +51,8 @@ impl std::fmt::Display for AdapterSummary {
     }
 }
 
-/// One wgpu device and queue.
+/// One wgpu device and queue (cloning shares them: wgpu handles are reference-counted).
+#[derive(Clone)]
 pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,

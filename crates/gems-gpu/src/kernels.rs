@@ -41,7 +41,7 @@ pub(crate) struct Params {
     pub num_blocks: u32,
     pub seg_len: u32,
     pub seg_width: u32,
-    pub pad0: u32,
+    pub carry: u32,
     pub pad1: u32,
 }
 
@@ -59,6 +59,8 @@ pub(crate) struct Kernels {
     pub project_backward: wgpu::ComputePipeline,
     pub reduce_segments: wgpu::ComputePipeline,
     pub background_backward: wgpu::ComputePipeline,
+    pub pack_gaussians: wgpu::ComputePipeline,
+    pub unpack_grads: wgpu::ComputePipeline,
 }
 
 impl Kernels {
@@ -83,6 +85,7 @@ impl Kernels {
             })
         };
         let scan = include_str!("../shaders/prefix_sum.wgsl");
+        let resident = include_str!("../shaders/resident.wgsl");
         Kernels {
             project_forward: make(
                 "project_forward",
@@ -152,6 +155,8 @@ impl Kernels {
                 include_str!("../shaders/background_backward.wgsl"),
                 "main",
             ),
+            pack_gaussians: make("pack_gaussians", false, resident, "pack_gaussians"),
+            unpack_grads: make("unpack_grads", false, resident, "unpack_grads"),
         }
     }
 }
@@ -227,7 +232,7 @@ impl Resident {
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
         if bytes > max {
-            return Err(GpuError::Shape(format!(
+            return Err(GpuError::Capacity(format!(
                 "{} needs {bytes} bytes but the adapter binds at most {max}; render fewer \
                  cameras or Gaussians per call",
                 self.label

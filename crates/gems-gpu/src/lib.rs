@@ -44,6 +44,7 @@ pub mod params;
 mod regularize;
 mod renderer;
 pub mod rng;
+mod step;
 
 pub use adam::{AdamConfig, AdamGroupStep, GaussianLrs, GpuAdam};
 pub use context::{AdapterSummary, DeviceChoice, GpuContext, select};
@@ -51,7 +52,8 @@ pub use loss::{BlurLoss, LossScalars};
 pub use mcmc::{GpuMcmc, N_MAX, NoiseParams};
 pub use params::{GpuGaussians, GpuGradients, Group, GroupMoments};
 pub use regularize::GpuRegularizers;
-pub use renderer::GpuRenderer;
+pub use renderer::{CameraChunk, GpuRenderer};
+pub use step::{ResidentStep, StepResult, StepSettings};
 
 /// A batch of `count` RGB images of `width`×`height` on the GPU.
 ///
@@ -84,6 +86,11 @@ pub enum GpuError {
     /// Inputs that do not fit together (or exceed the adapter's limits).
     #[error("shape mismatch: {0}")]
     Shape(String),
+    /// One render call needs a buffer larger than the adapter can bind: fewer cameras per
+    /// call (see [`ResidentStep`], which splits its batches into camera chunks) or fewer
+    /// Gaussians.
+    #[error("too large for the adapter: {0}")]
+    Capacity(String),
     /// The CPU-side validation of the inputs failed (same rules as the CPU engine).
     #[error(transparent)]
     Splat(#[from] gems_splat::SplatError),

@@ -22,6 +22,7 @@ use gems_splat::{
 };
 
 use crate::kernels::{Kernels, Params, Resident, WG, dispatch, f32s, groups_for, read_back, u32s};
+use crate::params::{GpuGaussians, GpuGradients, Group};
 use crate::{AdapterSummary, GpuContext, GpuError, ImageBatch};
 
 /// Floats per Gaussian in the packed parameter buffer (see `shaders/common.wgsl`).
@@ -34,6 +35,52 @@ const SG: u64 = 9;
 const SPLAT_BYTES: u64 = 64;
 /// Tile edge in pixels.
 const TILE: u32 = 16;
+/// Floats per Gaussian of the accumulators carried between camera chunks
+/// (`CARRY` in `shaders/project_backward.wgsl`).
+const CARRY: usize = 63;
+
+/// Where the Gaussians of a forward call come from.
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    /// On the CPU: packed and uploaded.
+    Host(&'a Gaussians),
+    /// Resident on the GPU: packed by a kernel, nothing crosses the bus.
+    Resident(&'a GpuGaussians),
+}
+
+impl Source<'_> {
+    fn len(&self) -> usize {
+        match self {
+            Source::Host(g) => g.len(),
+            Source::Resident(g) => g.len(),
+        }
+    }
+
+    fn sh_degree(&self) -> u32 {
+        match self {
+            Source::Host(g) => g.sh_degree,
+            Source::Resident(g) => g.sh_degree,
+        }
+    }
+}
+
+/// The position of one call in a batch split into camera chunks (see
+/// [`GpuRenderer::backward_resident`]): a whole batch is `{ first: true, last: true }`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CameraChunk {
+    /// The first chunk: the per-Gaussian sums start from zero.
+    pub first: bool,
+    /// The last chunk: the per-Gaussian gradients are final and written out.
+    pub last: bool,
+}
+
+impl CameraChunk {
+    /// A batch in one call.
+    pub const WHOLE: CameraChunk = CameraChunk {
+        first: true,
+        last: true,
+    };
+}
 
 /// What `backward` needs from the last `forward`.
 #[derive(Clone, Copy, Default)]
@@ -74,6 +121,7 @@ struct Buffers {
     pose_parts: Resident,
     pose: Resident,
     bg_grads: Resident,
+    carry: Resident,
 }
 
 impl Buffers {
@@ -104,6 +152,7 @@ impl Buffers {
             pose_parts: Resident::new("pose gradient parts"),
             pose: Resident::new("pose gradients"),
             bg_grads: Resident::new("background gradients"),
+            carry: Resident::new("camera-chunk carry"),
         }
     }
 }
@@ -115,19 +164,18 @@ impl Buffers {
 /// ([`GpuRenderer::forward_images`], [`GpuRenderer::backward_images`]) keep the images and
 /// `dL/dRGB` on the GPU as [`ImageBatch`]es.
 pub struct GpuRenderer {
-    device: wgpu::Device,
-    queue: wgpu::Queue,
-    limits: wgpu::Limits,
-    adapter: AdapterSummary,
+    ctx: GpuContext,
     kernels: Kernels,
     bufs: Buffers,
     saved: Saved,
+    /// Bytes copied back to the CPU by every call so far.
+    bytes_read: u64,
 }
 
 impl std::fmt::Debug for GpuRenderer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("GpuRenderer")
-            .field("adapter", &self.adapter)
+            .field("adapter", &self.ctx.adapter)
             .finish_non_exhaustive()
     }
 }
@@ -164,14 +212,23 @@ impl GpuRenderer {
     /// Compiles the kernels on `ctx`'s device.
     pub fn new(ctx: &GpuContext) -> Self {
         GpuRenderer {
-            device: ctx.device.clone(),
-            queue: ctx.queue.clone(),
-            limits: ctx.limits.clone(),
-            adapter: ctx.adapter.clone(),
+            ctx: ctx.clone(),
             kernels: Kernels::new(&ctx.device),
             bufs: Buffers::new(),
             saved: Saved::default(),
+            bytes_read: 0,
         }
+    }
+
+    /// The device and queue the engine runs on.
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    /// Bytes this engine has copied back to the CPU so far (images, gradients, and the one
+    /// intersection count per forward call that sizes the sort).
+    pub fn bytes_read_back(&self) -> u64 {
+        self.bytes_read
     }
 
     /// Number of (camera, Gaussian, tile) entries the last forward call sorted and rasterised.
@@ -181,7 +238,7 @@ impl GpuRenderer {
 
     /// The adapter the engine runs on.
     pub fn adapter(&self) -> &AdapterSummary {
-        &self.adapter
+        &self.ctx.adapter
     }
 
     /// Renders `g` from every camera over its background; mirrors
@@ -193,19 +250,23 @@ impl GpuRenderer {
         backgrounds: &[[f32; 3]],
         s: &RenderSettings,
     ) -> Result<RenderOutput, GpuError> {
-        self.run_forward(g, cams, backgrounds, s)?;
+        self.run_forward(Source::Host(g), cams, backgrounds, s)?;
         let sv = self.saved;
         let (nc, n) = (sv.num_cameras, sv.num_gaussians);
         let pixels = (nc * sv.width as usize * sv.height as usize) as u64;
-        let encoder = self.device.create_command_encoder(&Default::default());
-        let bytes = read_back(
-            &self.device,
-            &self.queue,
+        let encoder = self.ctx.device.create_command_encoder(&Default::default());
+        let b = &self.bufs;
+        let (rgb_b, aux_b, radii_b) = (
+            b.rgb.get().clone(),
+            b.aux.get().clone(),
+            b.radii.get().clone(),
+        );
+        let bytes = self.read(
             encoder,
             &[
-                (self.bufs.rgb.get(), 0, pixels * 12),
-                (self.bufs.aux.get(), 0, pixels * 16),
-                (self.bufs.radii.get(), 0, (nc * n) as u64 * 8),
+                (&rgb_b, 0, pixels * 12),
+                (&aux_b, 0, pixels * 16),
+                (&radii_b, 0, (nc * n) as u64 * 8),
             ],
         )?;
         let rgb = f32s(&bytes[0]);
@@ -239,50 +300,105 @@ impl GpuRenderer {
         backgrounds: &[[f32; 3]],
         s: &RenderSettings,
     ) -> Result<ImageBatch, GpuError> {
-        self.run_forward(g, cams, backgrounds, s)?;
-        Ok(ImageBatch {
+        self.run_forward(Source::Host(g), cams, backgrounds, s)?;
+        Ok(self.images())
+    }
+
+    /// Renders the resident Gaussians `g` (their parameters are gathered on the GPU; only the
+    /// cameras go up and the intersection count comes back) and leaves the RGB images on the
+    /// GPU, like [`GpuRenderer::forward_images`]. A batch whose buffers would exceed the
+    /// adapter's binding limit fails with [`GpuError::Capacity`]: split its cameras into
+    /// chunks ([`CameraChunk`]).
+    pub fn forward_resident(
+        &mut self,
+        g: &GpuGaussians,
+        cams: &[Camera],
+        backgrounds: &[[f32; 3]],
+        s: &RenderSettings,
+    ) -> Result<ImageBatch, GpuError> {
+        self.run_forward(Source::Resident(g), cams, backgrounds, s)?;
+        Ok(self.images())
+    }
+
+    fn images(&self) -> ImageBatch {
+        ImageBatch {
             buffer: self.bufs.rgb.get().clone(),
             count: self.saved.num_cameras,
             width: self.saved.width,
             height: self.saved.height,
-        })
+        }
+    }
+
+    /// Copies buffer ranges back (one submission) and counts the bytes.
+    fn read(
+        &mut self,
+        encoder: wgpu::CommandEncoder,
+        sources: &[(&wgpu::Buffer, u64, u64)],
+    ) -> Result<Vec<Vec<u8>>, GpuError> {
+        self.bytes_read += sources.iter().map(|s| s.2).sum::<u64>();
+        read_back(&self.ctx.device, &self.ctx.queue, encoder, sources)
     }
 
     fn run_forward(
         &mut self,
-        g: &Gaussians,
+        src: Source<'_>,
         cams: &[Camera],
         backgrounds: &[[f32; 3]],
         s: &RenderSettings,
     ) -> Result<(), GpuError> {
         self.saved.valid = false;
-        let (width, height) = check_inputs(g, cams, backgrounds)?;
-        let (n, nc) = (g.len(), cams.len());
-        let mut p = params_for(n, nc, width, height, g.sh_degree, s);
+        let (width, height) = match src {
+            Source::Host(g) => check_inputs(g, cams, backgrounds)?,
+            Source::Resident(_) => check_cameras(cams, backgrounds)?,
+        };
+        let (n, nc) = (src.len(), cams.len());
+        let mut p = params_for(n, nc, width, height, src.sh_degree(), s);
         let tiles = (p.tiles_x * p.tiles_y) as usize;
         let pairs = nc * n;
         if pairs as u64 >= u32::MAX as u64 || (nc * tiles) as u64 >= u32::MAX as u64 {
-            return Err(GpuError::Shape(format!(
+            return Err(GpuError::Capacity(format!(
                 "{nc} cameras × {n} Gaussians is too large for one call"
             )));
         }
         let pixels = (nc * width as usize * height as usize) as u64;
-        let (dev, lim) = (&self.device, &self.limits);
+        let (dev, lim) = (&self.ctx.device, &self.ctx.limits);
         let b = &mut self.bufs;
+        let mut enc = dev.create_command_encoder(&Default::default());
 
-        // Uploads.
-        let mut packed = Vec::with_capacity(n * GP);
-        for i in 0..n {
-            packed.extend_from_slice(&g.means[i]);
-            packed.extend_from_slice(&g.quats[i]);
-            packed.extend_from_slice(&g.log_scales[i]);
-            packed.push(g.opacity_logits[i]);
-            packed.extend(g.sh[i].iter().flatten());
-        }
+        // The Gaussians in the packed layout.
         let gauss = b.gaussians.ensure(dev, lim, (n * GP * 4) as u64)?;
-        if !packed.is_empty() {
-            self.queue
-                .write_buffer(gauss, 0, bytemuck::cast_slice(&packed));
+        match src {
+            Source::Host(g) => {
+                let mut packed = Vec::with_capacity(n * GP);
+                for i in 0..n {
+                    packed.extend_from_slice(&g.means[i]);
+                    packed.extend_from_slice(&g.quats[i]);
+                    packed.extend_from_slice(&g.log_scales[i]);
+                    packed.push(g.opacity_logits[i]);
+                    packed.extend(g.sh[i].iter().flatten());
+                }
+                if !packed.is_empty() {
+                    self.ctx
+                        .queue
+                        .write_buffer(gauss, 0, bytemuck::cast_slice(&packed));
+                }
+            }
+            Source::Resident(g) => {
+                let pp = Params {
+                    n: (n * GP) as u32,
+                    ..Params::default()
+                };
+                let groups: Vec<&wgpu::Buffer> =
+                    Group::ALL.iter().map(|&gr| &g.group(gr).param).collect();
+                dispatch(
+                    dev,
+                    &mut enc,
+                    &self.kernels.pack_gaussians,
+                    &pp,
+                    &[groups[0], groups[1], groups[2], groups[3], groups[4], gauss],
+                    groups_for(n * GP),
+                );
+            }
         }
         let mut cam_data = Vec::with_capacity(nc * CAMF);
         for (c, bg) in cams.iter().zip(backgrounds) {
@@ -293,14 +409,14 @@ impl GpuRenderer {
             cam_data.extend_from_slice(&[0.0; 5]);
         }
         let camb = b.cams.ensure(dev, lim, (nc * CAMF * 4) as u64)?;
-        self.queue
+        self.ctx
+            .queue
             .write_buffer(camb, 0, bytemuck::cast_slice(&cam_data));
 
         // Projection and tile counts, prefix sum, total read back to size the sort.
         b.splats.ensure(dev, lim, pairs as u64 * SPLAT_BYTES)?;
         b.radii.ensure(dev, lim, pairs as u64 * 8)?;
         b.offsets.ensure(dev, lim, (pairs as u64 + 1) * 4)?;
-        let mut enc = dev.create_command_encoder(&Default::default());
         dispatch(
             dev,
             &mut enc,
@@ -324,13 +440,24 @@ impl GpuRenderer {
             b.offsets.get(),
             pairs + 1,
         )?;
+        self.bytes_read += 4;
         let total_bytes = read_back(
             dev,
-            &self.queue,
+            &self.ctx.queue,
             enc,
             &[(b.offsets.get(), pairs as u64 * 4, 4)],
         )?;
         let total = u32s(&total_bytes[0])[0] as u64;
+        // The backward's per-entry gradients (SG floats per entry) are the largest
+        // entry-sized buffer: refuse here, before anything is sorted, when they cannot be bound.
+        let max_binding = lim.max_storage_buffer_binding_size.min(lim.max_buffer_size);
+        if total * SG * 4 > max_binding {
+            return Err(GpuError::Capacity(format!(
+                "{total} tile entries of {nc} cameras need {} bytes of gradients; the adapter \
+                 binds at most {max_binding}",
+                total * SG * 4
+            )));
+        }
 
         let mut enc = dev.create_command_encoder(&Default::default());
         b.ranges.ensure(dev, lim, (nc * tiles) as u64 * 8)?;
@@ -403,7 +530,7 @@ impl GpuRenderer {
             ],
             (nc * tiles) as u32,
         );
-        self.queue.submit([enc.finish()]);
+        self.ctx.queue.submit([enc.finish()]);
         self.saved = Saved {
             valid: true,
             num_gaussians: n,
@@ -439,8 +566,10 @@ impl GpuRenderer {
         let buf = self
             .bufs
             .d_rgb
-            .ensure(&self.device, &self.limits, pixels as u64 * 12)?;
-        self.queue.write_buffer(buf, 0, bytemuck::cast_slice(d_rgb));
+            .ensure(&self.ctx.device, &self.ctx.limits, pixels as u64 * 12)?;
+        self.ctx
+            .queue
+            .write_buffer(buf, 0, bytemuck::cast_slice(d_rgb));
         let batch = ImageBatch {
             buffer: buf.clone(),
             count: sv.num_cameras,
@@ -460,6 +589,136 @@ impl GpuRenderer {
         d_alpha: Option<&[f32]>,
     ) -> Result<Gradients, GpuError> {
         let sv = self.check_saved(g, cams, backgrounds)?;
+        let enc = self.encode_backward(&sv, g.sh_degree, d_rgb, d_alpha, CameraChunk::WHOLE)?;
+        let (n, nc) = (sv.num_gaussians, sv.num_cameras);
+        let b = &self.bufs;
+        let (grads_b, stats_b, pose_b, bg_b) = (
+            b.grads.get().clone(),
+            b.stats.get().clone(),
+            b.pose.get().clone(),
+            b.bg_grads.get().clone(),
+        );
+        let bytes = self.read(
+            enc,
+            &[
+                (&grads_b, 0, (n * GP * 4) as u64),
+                (&stats_b, 0, n as u64 * 8),
+                (&pose_b, 0, nc as u64 * 48),
+                (&bg_b, 0, nc as u64 * 12),
+            ],
+        )?;
+        let grads = f32s(&bytes[0]);
+        let stats = f32s(&bytes[1]);
+        let pose = f32s(&bytes[2]);
+        let bg = f32s(&bytes[3]);
+        let mut out = Gradients {
+            means: Vec::with_capacity(n),
+            quats: Vec::with_capacity(n),
+            log_scales: Vec::with_capacity(n),
+            opacity_logits: Vec::with_capacity(n),
+            sh: Vec::with_capacity(n),
+            backgrounds: bg.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect(),
+            cam_rotation: Vec::with_capacity(nc),
+            cam_translation: Vec::with_capacity(nc),
+            mean2d_grad_norm: Vec::with_capacity(n),
+            visible_count: Vec::with_capacity(n),
+        };
+        for gi in grads.chunks_exact(GP) {
+            out.means.push([gi[0], gi[1], gi[2]]);
+            out.quats.push([gi[3], gi[4], gi[5], gi[6]]);
+            out.log_scales.push([gi[7], gi[8], gi[9]]);
+            out.opacity_logits.push(gi[10]);
+            let mut sh = [[0.0f32; 3]; SH_COEFFS];
+            for (k, row) in sh.iter_mut().enumerate() {
+                *row = [gi[11 + 3 * k], gi[12 + 3 * k], gi[13 + 3 * k]];
+            }
+            out.sh.push(sh);
+        }
+        for st in stats.chunks_exact(2) {
+            out.mean2d_grad_norm.push(st[0]);
+            out.visible_count.push(st[1].to_bits());
+        }
+        for pc in pose.chunks_exact(12) {
+            out.cam_rotation.push([
+                [pc[0], pc[1], pc[2]],
+                [pc[3], pc[4], pc[5]],
+                [pc[6], pc[7], pc[8]],
+            ]);
+            out.cam_translation.push([pc[9], pc[10], pc[11]]);
+        }
+        Ok(out)
+    }
+
+    /// Backward of the last [`GpuRenderer::forward_resident`] (same `g`, `cams`,
+    /// `backgrounds`) with `dL/dRGB` on the GPU; nothing is read back. On the last chunk of a
+    /// batch the Gaussian gradients of the whole batch are written to `out` (as
+    /// [`GpuRenderer::backward`] computes them, bit for bit: the sums over cameras continue
+    /// across chunks in camera order). Every call leaves this chunk's per-camera pose
+    /// gradients in [`GpuRenderer::pose_gradients`].
+    pub fn backward_resident(
+        &mut self,
+        g: &GpuGaussians,
+        cams: &[Camera],
+        backgrounds: &[[f32; 3]],
+        d_rgb: &ImageBatch,
+        out: &GpuGradients,
+        chunk: CameraChunk,
+    ) -> Result<(), GpuError> {
+        let sv = self.check_saved_shape(g.len(), cams, backgrounds)?;
+        if out.capacity() < g.len() {
+            return Err(GpuError::Shape(format!(
+                "gradient buffers for {} Gaussians, {} resident",
+                out.capacity(),
+                g.len()
+            )));
+        }
+        let mut enc = self.encode_backward(&sv, g.sh_degree, d_rgb, None, chunk)?;
+        if chunk.last {
+            let n = sv.num_gaussians;
+            let p = Params {
+                n: (n * GP) as u32,
+                ..Params::default()
+            };
+            let b = &self.bufs;
+            dispatch(
+                &self.ctx.device,
+                &mut enc,
+                &self.kernels.unpack_grads,
+                &p,
+                &[
+                    out.group(Group::Means),
+                    out.group(Group::Quats),
+                    out.group(Group::LogScales),
+                    out.group(Group::OpacityLogits),
+                    out.group(Group::Sh),
+                    b.grads.get(),
+                ],
+                groups_for(n * GP),
+            );
+        }
+        self.ctx.queue.submit([enc.finish()]);
+        Ok(())
+    }
+
+    /// The per-camera pose gradients of the last backward call, `[C, 12]` f32: dL/dR
+    /// row-major then dL/dt of each camera (world-to-camera).
+    pub fn pose_gradients(&self) -> Result<&wgpu::Buffer, GpuError> {
+        if !self.saved.valid {
+            return Err(SplatError::NoForward("no successful forward call".into()).into());
+        }
+        Ok(self.bufs.pose.get())
+    }
+
+    /// Records the backward of the last forward (everything up to the pose and background
+    /// gradients) into a new encoder.
+    fn encode_backward(
+        &mut self,
+        sv: &Saved,
+        sh_degree: u32,
+        d_rgb: &ImageBatch,
+        d_alpha: Option<&[f32]>,
+        chunk: CameraChunk,
+    ) -> Result<wgpu::CommandEncoder, GpuError> {
         let s = sv.settings.unwrap_or_default();
         let (n, nc) = (sv.num_gaussians, sv.num_cameras);
         let pixels = nc * sv.width as usize * sv.height as usize;
@@ -485,16 +744,18 @@ impl GpuRenderer {
             ))
             .into());
         }
-        let (dev, lim) = (&self.device, &self.limits);
+        let (dev, lim) = (&self.ctx.device, &self.ctx.limits);
         let b = &mut self.bufs;
-        let mut p = params_for(n, nc, sv.width, sv.height, g.sh_degree, &s);
+        let mut p = params_for(n, nc, sv.width, sv.height, sh_degree, &s);
         let tiles = (p.tiles_x * p.tiles_y) as usize;
         let da_buf = b
             .d_alpha
             .ensure(dev, lim, d_alpha.map_or(4, |d| d.len() as u64 * 4))?;
         if let Some(da) = d_alpha {
             p.has_d_alpha = 1;
-            self.queue.write_buffer(da_buf, 0, bytemuck::cast_slice(da));
+            self.ctx
+                .queue
+                .write_buffer(da_buf, 0, bytemuck::cast_slice(da));
         }
         let total = sv.intersections;
         b.entry_grads.ensure(dev, lim, total * SG * 4)?;
@@ -504,6 +765,10 @@ impl GpuRenderer {
         b.pose_parts.ensure(dev, lim, (nc * n) as u64 * 48)?;
         b.pose.ensure(dev, lim, nc as u64 * 48)?;
         b.bg_grads.ensure(dev, lim, nc as u64 * 12)?;
+        let chunked = chunk != CameraChunk::WHOLE;
+        b.carry
+            .ensure(dev, lim, if chunked { (n * CARRY * 4) as u64 } else { 0 })?;
+        p.carry = u32::from(!chunk.first) | (u32::from(!chunk.last) << 1);
 
         let mut enc = dev.create_command_encoder(&Default::default());
         enc.clear_buffer(b.entry_grads.get(), 0, None);
@@ -551,6 +816,7 @@ impl GpuRenderer {
                 b.grads.get(),
                 b.stats.get(),
                 b.pose_parts.get(),
+                b.carry.get(),
             ],
             groups_for(n),
         );
@@ -573,57 +839,7 @@ impl GpuRenderer {
             &[&d_rgb.buffer, b.aux.get(), b.bg_grads.get()],
             nc as u32,
         );
-        let bytes = read_back(
-            dev,
-            &self.queue,
-            enc,
-            &[
-                (b.grads.get(), 0, (n * GP * 4) as u64),
-                (b.stats.get(), 0, n as u64 * 8),
-                (b.pose.get(), 0, nc as u64 * 48),
-                (b.bg_grads.get(), 0, nc as u64 * 12),
-            ],
-        )?;
-        let grads = f32s(&bytes[0]);
-        let stats = f32s(&bytes[1]);
-        let pose = f32s(&bytes[2]);
-        let bg = f32s(&bytes[3]);
-        let mut out = Gradients {
-            means: Vec::with_capacity(n),
-            quats: Vec::with_capacity(n),
-            log_scales: Vec::with_capacity(n),
-            opacity_logits: Vec::with_capacity(n),
-            sh: Vec::with_capacity(n),
-            backgrounds: bg.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect(),
-            cam_rotation: Vec::with_capacity(nc),
-            cam_translation: Vec::with_capacity(nc),
-            mean2d_grad_norm: Vec::with_capacity(n),
-            visible_count: Vec::with_capacity(n),
-        };
-        for gi in grads.chunks_exact(GP) {
-            out.means.push([gi[0], gi[1], gi[2]]);
-            out.quats.push([gi[3], gi[4], gi[5], gi[6]]);
-            out.log_scales.push([gi[7], gi[8], gi[9]]);
-            out.opacity_logits.push(gi[10]);
-            let mut sh = [[0.0f32; 3]; SH_COEFFS];
-            for (k, row) in sh.iter_mut().enumerate() {
-                *row = [gi[11 + 3 * k], gi[12 + 3 * k], gi[13 + 3 * k]];
-            }
-            out.sh.push(sh);
-        }
-        for st in stats.chunks_exact(2) {
-            out.mean2d_grad_norm.push(st[0]);
-            out.visible_count.push(st[1].to_bits());
-        }
-        for pc in pose.chunks_exact(12) {
-            out.cam_rotation.push([
-                [pc[0], pc[1], pc[2]],
-                [pc[3], pc[4], pc[5]],
-                [pc[6], pc[7], pc[8]],
-            ]);
-            out.cam_translation.push([pc[9], pc[10], pc[11]]);
-        }
-        Ok(out)
+        Ok(enc)
     }
 
     fn check_saved(
@@ -632,7 +848,17 @@ impl GpuRenderer {
         cams: &[Camera],
         backgrounds: &[[f32; 3]],
     ) -> Result<Saved, GpuError> {
-        let (width, height) = check_inputs(g, cams, backgrounds)?;
+        check_inputs(g, cams, backgrounds)?;
+        self.check_saved_shape(g.len(), cams, backgrounds)
+    }
+
+    fn check_saved_shape(
+        &self,
+        gaussians: usize,
+        cams: &[Camera],
+        backgrounds: &[[f32; 3]],
+    ) -> Result<Saved, GpuError> {
+        let (width, height) = check_cameras(cams, backgrounds)?;
         let sv = self.saved;
         if !sv.valid {
             return Err(SplatError::NoForward("no successful forward call".into()).into());
@@ -645,7 +871,7 @@ impl GpuRenderer {
                 height: sv.height as usize,
             },
             gems_splat::BatchShape {
-                gaussians: g.len(),
+                gaussians,
                 cameras: cams.len(),
                 width: width as usize,
                 height: height as usize,
@@ -653,6 +879,11 @@ impl GpuRenderer {
         )?;
         Ok(sv)
     }
+}
+
+/// The camera half of [`check_inputs`] (the resident Gaussians were checked when uploaded).
+fn check_cameras(cams: &[Camera], backgrounds: &[[f32; 3]]) -> Result<(u32, u32), SplatError> {
+    check_inputs(&Gaussians::with_degree(0), cams, backgrounds)
 }
 
 /// Encodes an in-place exclusive prefix sum of the first `n` u32 of `data`: blocks of 256,

@@ -114,12 +114,7 @@ pub fn render_blurred<R: Rasterizer + ?Sized>(
     bg: [f32; 3],
     ws: &mut BlurWorkspace,
 ) -> Result<(), TrainError> {
-    ws.cams.clear();
-    ws.cams.extend(
-        times
-            .iter()
-            .map(|&u| camera_from_c2w(&(*c2w_init * traj.eval(u)), k)),
-    );
+    virtual_cameras(c2w_init, traj, times, k, &mut ws.cams);
     ws.bgs.clear();
     ws.bgs.resize(times.len(), bg);
     let rgb = r.render(g, &ws.cams, &ws.bgs)?;
@@ -153,12 +148,49 @@ pub fn backward_blurred<R: Rasterizer + ?Sized>(
         ws.d_rgb.extend(d_blurred.iter().map(|d| d * inv_n));
     }
     let grads = r.gradients(g, &ws.cams, &ws.bgs, &ws.d_rgb)?;
+    accumulate_knot_gradients(
+        traj,
+        times,
+        &ws.cams,
+        &grads.cam_rotation,
+        &grads.cam_translation,
+        knot_grads,
+    );
+    Ok(grads)
+}
+
+/// The n virtual cameras of a view (world-to-camera, for the renderer) into `out`.
+pub fn virtual_cameras(
+    c2w_init: &Se3,
+    traj: &Trajectory,
+    times: &[f64],
+    k: &Intrinsics,
+    out: &mut Vec<Camera>,
+) {
+    out.clear();
+    out.extend(
+        times
+            .iter()
+            .map(|&u| camera_from_c2w(&(*c2w_init * traj.eval(u)), k)),
+    );
+}
+
+/// Adds each knot's gradient to `knot_grads` from the renderer's per-camera Euclidean pose
+/// gradients (`d_rotation[k]` = dL/dR, `d_translation[k]` = dL/dt of `cams[k]`, rendered at
+/// `times[k]`): the chain from the renderer's cameras to the trajectory, for either engine.
+pub fn accumulate_knot_gradients(
+    traj: &Trajectory,
+    times: &[f64],
+    cams: &[Camera],
+    d_rotation: &[[[f32; 3]; 3]],
+    d_translation: &[[f32; 3]],
+    knot_grads: &mut [[f64; 6]],
+) {
     for (k, &u) in times.iter().enumerate() {
-        let w2c = Se3::from_f32_arrays(&ws.cams[k].rotation, &ws.cams[k].translation);
-        let dr = grads.cam_rotation[k].map(|row| row.map(|v| v as f64));
-        let dt = grads.cam_translation[k].map(|v| v as f64);
+        let w2c = Se3::from_f32_arrays(&cams[k].rotation, &cams[k].translation);
+        let dr = d_rotation[k].map(|row| row.map(|v| v as f64));
+        let dt = d_translation[k].map(|v| v as f64);
         let g_delta = c2w_right_perturbation_gradient(&w2c, &dr, &dt);
         traj.accumulate_knot_gradients(u, &g_delta, knot_grads);
     }
-    Ok(grads)
 }

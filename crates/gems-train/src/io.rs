@@ -155,8 +155,17 @@ struct CheckpointMeta {
 pub const CHECKPOINT_TENSORS: &str = "checkpoint.safetensors";
 pub const CHECKPOINT_JSON: &str = "checkpoint.json";
 
-/// Saves the trainer's full state into `dir` (two files, each written atomically).
+/// Saves the trainer's full state into `dir` (two files, each written atomically). A trainer
+/// stepped by hand on the GPU engine must be synced first ([`Trainer::sync`]; `Trainer::run`
+/// syncs at checkpoint steps): a stale host copy is refused, never saved.
 pub fn save_checkpoint(dir: &Path, t: &Trainer) -> Result<(), TrainError> {
+    if !t.is_synced() {
+        return Err(TrainError::Input(
+            "the GPU-resident Gaussians were not downloaded: call Trainer::sync before saving a \
+             checkpoint"
+                .into(),
+        ));
+    }
     let s = &t.state;
     let n = s.gaussians.len();
     let mut ts = TensorSet::default();
@@ -363,7 +372,9 @@ pub const MODEL_TENSORS: &str = "model.safetensors";
 pub const MODEL_JSON: &str = "model.json";
 
 impl TrainOutput {
-    /// Collects the result of a (finished or interrupted) trainer.
+    /// Collects the result of a (finished or interrupted) trainer from its host state: sync a
+    /// trainer stepped by hand on the GPU engine first ([`Trainer::sync`]; `Trainer::run`
+    /// ends synced).
     pub fn from_trainer(t: &Trainer) -> Self {
         let mut gaussians = t.state.gaussians.clone();
         gaussians.sh_degree = t.cfg.sh_degree;

@@ -9,12 +9,26 @@
 //!
 //! Everything that changes during training lives in [`TrainState`], which checkpoints save and
 //! resume restores, so a resumed run continues bit-identically.
+//!
+//! On the GPU engine the step is resident (`gems_gpu::ResidentStep`): the Gaussians and their
+//! Adam moments stay on the GPU between steps, and per step only the view's virtual cameras go
+//! up and its per-camera pose gradients, loss and PSNR come back. The trajectories, their Adam
+//! state, the view order, the random background and the MCMC draws stay on the CPU, in the same
+//! code as the CPU engine's step. The SGLD noise is drawn on the GPU (Philox keyed by the seed
+//! and the step) instead of from the trainer's ChaCha8 stream, so a GPU run does not retrace a
+//! CPU run draw for draw; it is reproducible on its own (same seed, same adapter → same bits,
+//! resume included). `state.gaussians` and `state.adam` are then a host copy, refreshed by
+//! [`Trainer::sync`]: the trainer syncs at every `checkpoint_every`-th step and at the last
+//! step (so [`Trainer::run`]'s callback sees a current state exactly when a checkpoint is due),
+//! and [`Trainer::state`], [`Trainer::render_view`] and engine changes sync first;
+//! [`crate::io::save_checkpoint`] refuses a stale copy.
 
 use std::time::Instant;
 
+use gems_gpu::{AdamConfig, GaussianLrs, GroupMoments, NoiseParams, ResidentStep, StepSettings};
 use gems_math::{Se3, Trajectory};
 use gems_metrics::TrainingLoss;
-use gems_splat::{Gaussians, Gradients};
+use gems_splat::{Gaussians, Gradients, RenderSettings};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -22,10 +36,16 @@ use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
 use crate::adam::{AdamHyper, AdamState};
-use crate::blur::{BlurWorkspace, Intrinsics, Rasterizer, backward_blurred, render_blurred};
+use crate::blur::{
+    BlurWorkspace, Intrinsics, Rasterizer, accumulate_knot_gradients, backward_blurred,
+    render_blurred, virtual_cameras,
+};
 use crate::config::{TrainConfig, TrajectoryKind};
 use crate::engine::Engine;
-use crate::mcmc::{BinomialTable, GaussianAdam, add_new, inject_noise, relocate_dead};
+use crate::mcmc::{
+    BinomialTable, GaussianAdam, add_new, growth_draws, inject_noise, relocate_dead,
+    relocation_draws,
+};
 use crate::normalize::Normalization;
 
 /// One blurry training image, in the normalised frame.
@@ -128,6 +148,13 @@ pub fn psnr(a: &[f32], b: &[f32]) -> f32 {
     (-10.0 * mse.max(1e-20).log10()) as f32
 }
 
+/// The Gaussians and Adam moments resident on the GPU, and whether `state` holds them.
+struct Resident {
+    step: ResidentStep,
+    /// `state.gaussians` and `state.adam` equal the resident values.
+    host_current: bool,
+}
+
 /// The trainer: configuration, data and state, plus reusable buffers.
 pub struct Trainer {
     pub cfg: TrainConfig,
@@ -135,8 +162,12 @@ pub struct Trainer {
     pub normalization: Normalization,
     pub scene_scale: f32,
     pub init_label: String,
+    /// Everything a checkpoint holds. On the GPU engine `gaussians` and `adam` are a host copy
+    /// of the resident values as of the last [`Trainer::sync`] (module docs); the other fields
+    /// are always current.
     pub state: TrainState,
     renderer: Engine,
+    resident: Option<Resident>,
     rng: ChaCha8Rng,
     losses: Vec<((u32, u32), TrainingLoss)>,
     ws: BlurWorkspace,
@@ -247,6 +278,7 @@ impl Trainer {
             init_label,
             state,
             renderer: Engine::cpu(),
+            resident: None,
             losses: Vec::new(),
             ws: BlurWorkspace::default(),
             d_blurred: Vec::new(),
@@ -256,8 +288,105 @@ impl Trainer {
 
     /// Renders with `engine` from now on (the CPU engine by default) and returns the previous
     /// one. The engine is not part of the checkpointed state: a run may resume on another.
+    /// State resident on a previous GPU stays there until the next step or [`Trainer::sync`],
+    /// which move it to where the new engine needs it.
     pub fn set_engine(&mut self, engine: Engine) -> Engine {
         std::mem::replace(&mut self.renderer, engine)
+    }
+
+    /// Downloads the resident Gaussians and Adam moments into `state` when the host copy is
+    /// stale (a no-op on the CPU engine).
+    pub fn sync(&mut self) -> Result<(), TrainError> {
+        let Some(res) = &mut self.resident else {
+            return Ok(());
+        };
+        if res.host_current {
+            return Ok(());
+        }
+        let (mut g, moments) = res.step.download()?;
+        g.sh_degree = self.state.gaussians.sh_degree;
+        let a = &mut self.state.adam;
+        for (dst, m) in [
+            &mut a.means,
+            &mut a.quats,
+            &mut a.log_scales,
+            &mut a.opacity_logits,
+            &mut a.sh,
+        ]
+        .into_iter()
+        .zip(moments)
+        {
+            dst.m = m.m;
+            dst.v = m.v;
+            dst.step = m.step;
+        }
+        self.state.gaussians = g;
+        res.host_current = true;
+        Ok(())
+    }
+
+    /// Whether `state` holds the current Gaussians and Adam moments (always on the CPU
+    /// engine; on the GPU after [`Trainer::sync`] until the next step).
+    pub fn is_synced(&self) -> bool {
+        self.resident.as_ref().is_none_or(|r| r.host_current)
+    }
+
+    /// The whole state, synced first.
+    pub fn state(&mut self) -> Result<&TrainState, TrainError> {
+        self.sync()?;
+        Ok(&self.state)
+    }
+
+    /// Bytes the resident GPU step has copied back to the CPU so far (0 on the CPU engine):
+    /// per step the pose gradients and a few scalars, per refine step the opacities, per sync
+    /// the whole state.
+    pub fn gpu_bytes_read_back(&self) -> u64 {
+        self.resident
+            .as_ref()
+            .map_or(0, |r| r.step.bytes_read_back())
+    }
+
+    /// Puts the Gaussians where the engine needs them: resident on its GPU, or in `state`.
+    fn place_state(&mut self) -> Result<(), TrainError> {
+        let device = match &self.renderer {
+            Engine::Gpu(r) => Some(r.context().clone()),
+            Engine::Cpu(_) => None,
+        };
+        if let (Some(ctx), Some(res)) = (&device, &self.resident)
+            && res.step.context().device == ctx.device
+        {
+            return Ok(());
+        }
+        self.sync()?;
+        self.resident = None;
+        if let Some(ctx) = device {
+            let a = &self.state.adam;
+            let m = |s: &AdamState| GroupMoments {
+                m: s.m.clone(),
+                v: s.v.clone(),
+                step: s.step,
+            };
+            let moments = [
+                m(&a.means),
+                m(&a.quats),
+                m(&a.log_scales),
+                m(&a.opacity_logits),
+                m(&a.sh),
+            ];
+            self.resident = Some(Resident {
+                step: ResidentStep::new(&ctx, &self.state.gaussians, Some(&moments))?,
+                host_current: true,
+            });
+        }
+        Ok(())
+    }
+
+    /// Live Gaussians.
+    pub fn gaussian_count(&self) -> usize {
+        match &self.resident {
+            Some(r) => r.step.len(),
+            None => self.state.gaussians.len(),
+        }
     }
 
     /// The engine the trainer renders with.
@@ -299,8 +428,10 @@ impl Trainer {
     /// One optimisation step.
     pub fn step(&mut self) -> Result<StepReport, TrainError> {
         let start = Instant::now();
+        self.place_state()?;
         let step = self.state.step;
-        self.state.gaussians.sh_degree = self.cfg.sh_degree_at(step);
+        let sh_degree = self.cfg.sh_degree_at(step);
+        self.state.gaussians.sh_degree = sh_degree;
         let v = self.next_view();
         let bg: [f32; 3] = if self.cfg.random_background {
             std::array::from_fn(|_| self.rng.random::<f32>())
@@ -308,13 +439,80 @@ impl Trainer {
             [0.0; 3]
         };
         let traj = self.trajectory(v);
+        for kg in &mut self.knot_grads {
+            *kg = [0.0; 6];
+        }
+        let (loss, train_psnr) = if self.resident.is_some() {
+            self.gaussian_step_resident(v, bg, &traj, step, sh_degree)?
+        } else {
+            self.gaussian_step_host(v, bg, &traj, step)?
+        };
+        self.pose_update(v, step);
+
+        // MCMC after the optimizer step (gsplat ≥ 1.5), with the decayed lr.
+        if self.cfg.is_refine_step(step) {
+            let (moved, added) = self.refine()?;
+            tracing::debug!(
+                step,
+                moved,
+                added,
+                total = self.gaussian_count(),
+                "MCMC refine"
+            );
+        }
+        let noise = self.cfg.means_lr(step + 1, self.scene_scale) * self.cfg.mcmc.noise_lr;
+        let min_opacity = self.cfg.mcmc.min_opacity;
+        match &mut self.resident {
+            Some(res) => res.step.noise(&NoiseParams {
+                seed: self.cfg.seed,
+                step: step as u64,
+                scale: noise,
+                min_opacity,
+            }),
+            None => inject_noise(&mut self.state.gaussians, noise, min_opacity, &mut self.rng),
+        }
+
+        let count = self.gaussian_count();
+        let h = &mut self.state.history;
+        h.loss.push(loss);
+        h.psnr.push(train_psnr);
+        h.gaussians.push(count as u32);
+        h.view.push(v as u32);
+        self.state.step += 1;
+        self.state.rng_word_pos = self.rng.get_word_pos();
+        if let Some(res) = &mut self.resident {
+            res.host_current = false;
+            let every = self.cfg.checkpoint_every;
+            let s = self.state.step;
+            if s >= self.cfg.steps || (every > 0 && s % every == 0) {
+                self.sync()?;
+            }
+        }
+        self.state.seconds += start.elapsed().as_secs_f64();
+        Ok(StepReport {
+            step: self.state.step,
+            loss,
+            psnr: train_psnr,
+            gaussians: count,
+        })
+    }
+
+    /// Render, loss, backward, regularisers and Adam on the host-side Gaussians (any
+    /// [`Rasterizer`]); returns (loss, PSNR) and leaves the knot gradients in `knot_grads`.
+    fn gaussian_step_host(
+        &mut self,
+        v: usize,
+        bg: [f32; 3],
+        traj: &Trajectory,
+        step: usize,
+    ) -> Result<(f32, f32), TrainError> {
         let view = &self.views[v];
         let k = view.intrinsics;
         render_blurred(
             &mut self.renderer,
             &self.state.gaussians,
             &view.c2w_init,
-            &traj,
+            traj,
             &self.times,
             &k,
             bg,
@@ -328,13 +526,10 @@ impl Trainer {
             .compute(&self.ws.blurred, &view.image, &mut self.d_blurred)
             .map_err(|e| TrainError::Input(format!("view {}: {e}", view.name)))?;
         let train_psnr = psnr(&self.ws.blurred, &view.image);
-        for kg in &mut self.knot_grads {
-            *kg = [0.0; 6];
-        }
         let mut grads = backward_blurred(
             &mut self.renderer,
             &self.state.gaussians,
-            &traj,
+            traj,
             &self.times,
             &self.d_blurred,
             &mut self.ws,
@@ -342,58 +537,104 @@ impl Trainer {
         )?;
         let reg = add_regularizers(&self.cfg, &self.state.gaussians, &mut grads);
         self.adam_gaussians(&grads, step);
-        self.pose_update(v, step);
+        Ok((lv.loss + reg, train_psnr))
+    }
 
-        // MCMC after the optimizer step (gsplat ≥ 1.5), with the decayed lr.
-        if self.cfg.is_refine_step(step) {
-            let c = &self.cfg.mcmc;
-            let moved = relocate_dead(
-                &mut self.state.gaussians,
-                &mut self.state.adam,
-                c.min_opacity,
-                &self.binoms,
-                &mut self.rng,
-            );
-            let added = add_new(
-                &mut self.state.gaussians,
-                &mut self.state.adam,
-                c.cap_max,
-                c.growth_factor,
-                c.min_opacity,
-                &self.binoms,
-                &mut self.rng,
-            );
-            tracing::debug!(
-                step,
-                moved,
-                added,
-                total = self.state.gaussians.len(),
-                "MCMC refine"
-            );
+    /// The same on the GPU-resident Gaussians (`gems_gpu::ResidentStep`): only the pose
+    /// gradients and the scalars come back.
+    fn gaussian_step_resident(
+        &mut self,
+        v: usize,
+        bg: [f32; 3],
+        traj: &Trajectory,
+        step: usize,
+        sh_degree: u32,
+    ) -> Result<(f32, f32), TrainError> {
+        let (Engine::Gpu(r), Some(res)) = (&mut self.renderer, &mut self.resident) else {
+            return Err(TrainError::Input(
+                "the resident step needs the GPU engine".into(),
+            ));
+        };
+        let view = &self.views[v];
+        virtual_cameras(
+            &view.c2w_init,
+            traj,
+            &self.times,
+            &view.intrinsics,
+            &mut self.ws.cams,
+        );
+        let c = &self.cfg;
+        let settings = StepSettings {
+            ssim_lambda: c.ssim_lambda,
+            opacity_reg: c.mcmc.opacity_reg,
+            scale_reg: c.mcmc.scale_reg,
+            lrs: GaussianLrs {
+                means: c.means_lr(step, self.scene_scale),
+                quats: c.lr.quats,
+                log_scales: c.lr.log_scales,
+                opacity_logits: c.lr.opacities,
+                sh_dc: c.lr.sh_dc,
+                sh_rest: c.lr.sh_rest,
+            },
+            adam: AdamConfig {
+                beta1: c.adam_beta1,
+                beta2: c.adam_beta2,
+                eps: c.adam_eps,
+                weight_decay: 0.0,
+            },
+            render: RenderSettings::default(),
+        };
+        res.step.set_sh_degree(sh_degree);
+        let out = res
+            .step
+            .step(r, v, &view.image, &self.ws.cams, bg, &settings)
+            .map_err(|e| match e {
+                gems_gpu::GpuError::Shape(why) => {
+                    TrainError::Input(format!("view {}: {why}", view.name))
+                }
+                other => other.into(),
+            })?;
+        accumulate_knot_gradients(
+            traj,
+            &self.times,
+            &self.ws.cams,
+            &out.cam_rotation,
+            &out.cam_translation,
+            &mut self.knot_grads,
+        );
+        Ok((out.loss, out.psnr))
+    }
+
+    /// MCMC relocation then growth, on the host Gaussians or the resident ones (same draws
+    /// from the trainer's generator); returns (relocated, added).
+    fn refine(&mut self) -> Result<(usize, usize), TrainError> {
+        let c = &self.cfg.mcmc;
+        if let Some(res) = &mut self.resident {
+            let opacities = res.step.opacity_logits()?;
+            let (dead, sources) = relocation_draws(&opacities, c.min_opacity, &mut self.rng);
+            let moved = res.step.relocate(&dead, &sources, c.min_opacity)?;
+            let opacities = res.step.opacity_logits()?;
+            let sources = growth_draws(&opacities, c.cap_max, c.growth_factor, &mut self.rng);
+            let added = res.step.grow(&sources, c.min_opacity)?;
+            return Ok((moved, added));
         }
-        let noise = self.cfg.means_lr(step + 1, self.scene_scale) * self.cfg.mcmc.noise_lr;
-        inject_noise(
+        let moved = relocate_dead(
             &mut self.state.gaussians,
-            noise,
-            self.cfg.mcmc.min_opacity,
+            &mut self.state.adam,
+            c.min_opacity,
+            &self.binoms,
             &mut self.rng,
         );
-
-        let loss = lv.loss + reg;
-        let h = &mut self.state.history;
-        h.loss.push(loss);
-        h.psnr.push(train_psnr);
-        h.gaussians.push(self.state.gaussians.len() as u32);
-        h.view.push(v as u32);
-        self.state.step += 1;
-        self.state.rng_word_pos = self.rng.get_word_pos();
-        self.state.seconds += start.elapsed().as_secs_f64();
-        Ok(StepReport {
-            step: self.state.step,
-            loss,
-            psnr: train_psnr,
-            gaussians: self.state.gaussians.len(),
-        })
+        let added = add_new(
+            &mut self.state.gaussians,
+            &mut self.state.adam,
+            c.cap_max,
+            c.growth_factor,
+            c.min_opacity,
+            &self.binoms,
+            &mut self.rng,
+        );
+        Ok((moved, added))
     }
 
     fn adam_gaussians(&mut self, gr: &Gradients, step: usize) {
@@ -505,6 +746,7 @@ impl Trainer {
 
     /// Renders view `v` from `c2w` with a black background (for evaluation and tests).
     pub fn render_view(&mut self, c2w: &Se3, k: &Intrinsics) -> Result<Vec<f32>, TrainError> {
+        self.sync()?;
         let mut g = self.state.gaussians.clone();
         g.sh_degree = self.cfg.sh_degree;
         let cam = crate::blur::camera_from_c2w(c2w, k);

@@ -1,6 +1,9 @@
-//! Training on the GPU engine (Mesa lavapipe on CI) against the CPU engine: the same short run
-//! from the same initialisation ends at the same fit (within 0.3 dB), and checkpoint + resume
-//! on the GPU continues bit-identically. Fails (never skips) without a GPU adapter.
+//! Training on the GPU engine (Mesa lavapipe on CI) against the CPU engine. On the GPU the step
+//! is resident (`gems_gpu::ResidentStep`): Gaussians and Adam moments never leave the GPU
+//! between steps. The same short runs from the same initialisations end at the same fit (mean
+//! over seeds within 0.3 dB) with the same Gaussian count at every step; checkpoint + resume on
+//! the GPU continues bit-identically; a step reads back only the pose gradients and a few
+//! scalars. Fails (never skips) without a GPU adapter.
 
 mod common;
 
@@ -11,11 +14,12 @@ use gems_train::io::{load_checkpoint, save_checkpoint};
 use gems_train::normalize::Normalization;
 use gems_train::trainer::{TrainInput, Trainer, psnr};
 
-fn config() -> TrainConfig {
+/// 60 steps with refinement (relocation + growth) at steps 6, 26 and 46.
+fn config(seed: u64) -> TrainConfig {
     let mut c = TrainConfig {
         steps: 60,
         num_virtual_views: 4,
-        seed: 3,
+        seed,
         ..TrainConfig::default()
     };
     c.pose.accumulate_steps = 5;
@@ -27,9 +31,15 @@ fn config() -> TrainConfig {
 
 fn trainer(cfg: &TrainConfig, engine: Engine) -> Trainer {
     let scene = common::blur_scene(3, 32, 24, 0.2, 0.02, 1);
+    let mut gaussians = common::init_gaussians(&scene, 0.02, 3);
+    // Every tenth Gaussian starts dead (opacity 4.5e-5 < min_opacity 0.005), so every refine
+    // step relocates as well as grows.
+    for l in gaussians.opacity_logits.iter_mut().step_by(10) {
+        *l = -10.0;
+    }
     let input = TrainInput {
         views: scene.views.clone(),
-        gaussians: common::init_gaussians(&scene, 0.02, 3),
+        gaussians,
         normalization: Normalization::identity(),
         scene_scale: 1.0,
         init_label: "gt-noisy".into(),
@@ -44,7 +54,6 @@ fn gpu() -> Engine {
         "no GPU adapter: install mesa-vulkan-drivers and libvulkan1, run with WGPU_BACKEND=vulkan",
     );
     assert!(matches!(e, Engine::Gpu(_)));
-    eprintln!("{}", e.describe());
     e
 }
 
@@ -68,35 +77,66 @@ fn fit_psnr(t: &mut Trainer) -> f32 {
     sum / n as f32
 }
 
+/// The GPU run draws its SGLD noise on the GPU (Philox) instead of from the trainer's ChaCha8
+/// stream, so from the first step on its backgrounds, view order and MCMC draws differ from the
+/// CPU run's: two engines are two samples of the same stochastic optimisation, like two seeds.
+/// One 60-step run varies by ±0.4 dB from seed to seed here, so the engines are compared on the
+/// mean over four seeds (measured on lavapipe: CPU 23.73 dB, GPU 23.88 dB).
 #[test]
-fn gpu_training_ends_within_0_3_db_of_cpu_training() {
-    let cfg = config();
-    let mut cpu = trainer(&cfg, Engine::cpu());
-    let start = fit_psnr(&mut trainer(&cfg, Engine::cpu()));
-    cpu.run(|_, _| Ok(())).unwrap();
-    let mut gpu_run = trainer(&cfg, gpu());
-    gpu_run.run(|_, _| Ok(())).unwrap();
-    assert_eq!(gpu_run.state.step, cfg.steps);
-    let (pc, pg) = (fit_psnr(&mut cpu), fit_psnr(&mut gpu_run));
-    eprintln!("fit PSNR: start {start:.2} dB, CPU {pc:.2} dB, GPU {pg:.2} dB");
+fn resident_gpu_training_ends_within_0_3_db_of_cpu_training() {
+    let seeds = [3u64, 4, 5, 6];
+    let (mut sum_start, mut sum_cpu, mut sum_gpu) = (0.0, 0.0, 0.0);
+    for &seed in &seeds {
+        let cfg = config(seed);
+        sum_start += fit_psnr(&mut trainer(&cfg, Engine::cpu()));
+        let mut cpu = trainer(&cfg, Engine::cpu());
+        cpu.run(|_, _| Ok(())).unwrap();
+        let mut gpu_run = trainer(&cfg, gpu());
+        gpu_run.run(|_, _| Ok(())).unwrap();
+        assert_eq!(gpu_run.state.step, cfg.steps);
+        assert!(
+            gpu_run.gpu_bytes_read_back() > 0,
+            "the GPU run used the resident step"
+        );
+        // Growth depends only on the count, relocation keeps it: the same count at every step.
+        assert_eq!(cpu.state.history.gaussians, gpu_run.state.history.gaussians);
+        let counts = &cpu.state.history.gaussians;
+        let grew = counts.windows(2).filter(|w| w[1] > w[0]).count();
+        assert!(grew >= 2, "at least two growth steps: {counts:?}");
+        let (pc, pg) = (fit_psnr(&mut cpu), fit_psnr(&mut gpu_run));
+        eprintln!("seed {seed}: CPU {pc:.2} dB, GPU {pg:.2} dB");
+        sum_cpu += pc;
+        sum_gpu += pg;
+    }
+    let n = seeds.len() as f32;
+    let (start, pc, pg) = (sum_start / n, sum_cpu / n, sum_gpu / n);
+    eprintln!("mean fit PSNR: start {start:.2} dB, CPU {pc:.2} dB, GPU {pg:.2} dB");
     assert!(
-        pc > start + 1.0,
-        "training did not improve the fit: {start} → {pc}"
+        pc > start + 1.0 && pg > start + 1.0,
+        "training did not improve the fit: {start} → CPU {pc}, GPU {pg}"
     );
     assert!((pc - pg).abs() <= 0.3, "CPU {pc} dB vs GPU {pg} dB");
 }
 
 #[test]
-fn gpu_resume_is_bit_identical() {
-    let mut cfg = config();
-    cfg.steps = 16;
+fn resident_gpu_resume_is_bit_identical() {
+    let mut cfg = config(3);
+    cfg.steps = 30;
+    // Refinement (relocation and growth, with the opacity round trip) at steps 6 and 26, on
+    // either side of the checkpoint at step 13.
     let mut a = trainer(&cfg, gpu());
     a.run(|_, _| Ok(())).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let mut b = trainer(&cfg, gpu());
-    for _ in 0..7 {
+    for _ in 0..13 {
         b.step().unwrap();
     }
+    assert!(!b.is_synced());
+    assert!(
+        save_checkpoint(dir.path(), &b).is_err(),
+        "a stale host copy must not be saved"
+    );
+    b.sync().unwrap();
     save_checkpoint(dir.path(), &b).unwrap();
     let views = b.views.clone();
     drop(b);
@@ -112,7 +152,72 @@ fn gpu_resume_is_bit_identical() {
     .unwrap();
     c.set_engine(gpu());
     c.run(|_, _| Ok(())).unwrap();
-    assert_eq!(a.state.gaussians, c.state.gaussians);
-    assert_eq!(a.state.knots, c.state.knots);
-    assert_eq!(a.state.adam, c.state.adam);
+    assert!(a.is_synced() && c.is_synced(), "run ends synced");
+    // Every parameter, moment, knot and curve, bit for bit (f32 PartialEq would also accept
+    // 0.0 == -0.0: compare the bits).
+    let bits = |g: &gems_splat::Gaussians| -> Vec<u32> {
+        let mut v: Vec<f32> = Vec::new();
+        v.extend(g.means.iter().flatten());
+        v.extend(g.quats.iter().flatten());
+        v.extend(g.log_scales.iter().flatten());
+        v.extend(&g.opacity_logits);
+        v.extend(g.sh.iter().flatten().flatten());
+        v.into_iter().map(f32::to_bits).collect()
+    };
+    let (sa, sc) = (a.state().unwrap().clone(), c.state().unwrap().clone());
+    assert_eq!(bits(&sa.gaussians), bits(&sc.gaussians));
+    assert_eq!(sa.adam, sc.adam);
+    assert_eq!(sa.knots, sc.knots);
+    assert_eq!(sa.knot_adam, sc.knot_adam);
+    assert_eq!(sa.history, sc.history);
+    assert_eq!(sa.rng_word_pos, sc.rng_word_pos);
+    // And the same seed gives the same run: a second uninterrupted run equals the first.
+    let mut d = trainer(&cfg, gpu());
+    d.run(|_, _| Ok(())).unwrap();
+    assert_eq!(bits(&sa.gaussians), bits(&d.state.gaussians));
+    assert_eq!(sa.adam, d.state.adam);
+}
+
+/// Per step only the virtual cameras' pose gradients (48 bytes each), the loss scalars (16 +
+/// 4 bytes) and one 4-byte intersection count per renderer call cross back to the CPU; the
+/// Gaussians (236 bytes each, plus their Adam moments) never do, except at the opacity round
+/// trip of refine steps (4 bytes each) and at syncs.
+#[test]
+fn resident_step_reads_back_only_pose_gradients_and_scalars() {
+    let cfg = config(3);
+    let mut t = trainer(&cfg, gpu());
+    let n = cfg.num_virtual_views;
+    let bound = (n * 48 + 16 + 4 + n * 4) as u64;
+    for _ in 0..12 {
+        let step = t.state.step;
+        let before = t.gpu_bytes_read_back();
+        t.step().unwrap();
+        let read = t.gpu_bytes_read_back() - before;
+        let gaussians = t.gaussian_count() as u64;
+        if cfg.is_refine_step(step) {
+            // Two opacity downloads (before relocation and before growth).
+            assert!(
+                read <= bound + 8 * gaussians,
+                "refine step {step}: {read} bytes"
+            );
+        } else {
+            assert!(
+                read <= bound,
+                "step {step}: {read} bytes read back, bound {bound}"
+            );
+            assert!(
+                read * 10 < gaussians * 236,
+                "{read} bytes vs {gaussians} Gaussians"
+            );
+        }
+    }
+    // The host copy is stale until synced; syncing downloads everything once.
+    assert!(!t.is_synced());
+    let before = t.gpu_bytes_read_back();
+    t.sync().unwrap();
+    assert!(t.is_synced());
+    assert_eq!(
+        t.gpu_bytes_read_back() - before,
+        t.gaussian_count() as u64 * 59 * 4 * 3
+    );
 }
