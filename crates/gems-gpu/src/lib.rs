@@ -26,6 +26,10 @@
 //! * [`GpuMcmc`] — 3DGS-MCMC: SGLD noise (Philox, [`rng`]), relocation and growth;
 //!   [`GpuRegularizers`] — its opacity and scale regularisers with their gradients.
 //! * [`buffers`] — uploads, readbacks and storage buffers shared by the kernels.
+//! * [`ResidentStep`] — the whole step over those parts: Gaussians, Adam moments and training
+//!   images stay on the GPU; per step the virtual cameras go up and only their pose gradients
+//!   and the loss scalars come back (gems-train's trainer uses it on the GPU engine). Batches
+//!   larger than the adapter's storage bindings run in camera chunks ([`CameraChunk`]).
 //!
 //! The training-step kernels follow the same rule: elementwise updates (Adam, noise, splits,
 //! copies) and fixed-order workgroup trees for every sum (loss, SSIM, PSNR, regularisers), so
@@ -33,6 +37,18 @@
 //! (seed, step, row). Against the CPU engine they agree to a few f32 ulps per pass (Adam: 0 ulp
 //! on lavapipe), not bit for bit: the GPU's `exp`/`log`/`sin`/`cos` differ from Rust's, and the
 //! CPU sums some scalars in f64.
+//!
+//! What is and is not bit-reproducible:
+//! * Bit-reproducible on one adapter and driver: every forward and backward, a whole
+//!   [`ResidentStep`], hence a whole GPU training run for a seed, and a run resumed from a
+//!   checkpoint (tested on lavapipe). Splitting a batch into camera chunks does not change a
+//!   bit (the per-Gaussian sums continue across chunks in camera order; tested).
+//! * Not bit-identical across adapters or drivers (the last bits of `exp`, `log`, `sqrt`, and
+//!   the multiply-adds the shader compiler fuses), nor to the CPU engine: a GPU run also draws
+//!   its SGLD noise from Philox on the GPU rather than from the CPU trainer's ChaCha8 stream,
+//!   so its backgrounds, view order and MCMC draws diverge from a CPU run's after the first
+//!   step. The two engines end at the same fit on average (gems-train `tests/gpu_engine.rs`),
+//!   not at the same parameters.
 
 mod adam;
 pub mod buffers;

@@ -484,7 +484,7 @@ impl Trainer {
             res.host_current = false;
             let every = self.cfg.checkpoint_every;
             let s = self.state.step;
-            if s >= self.cfg.steps || (every > 0 && s % every == 0) {
+            if s >= self.cfg.steps || (every > 0 && s.is_multiple_of(every)) {
                 self.sync()?;
             }
         }
