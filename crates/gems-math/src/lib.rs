@@ -39,7 +39,7 @@ pub use so3::{
     So3, hat, so3_left_jacobian, so3_left_jacobian_inv, so3_right_jacobian, so3_right_jacobian_inv,
     vee,
 };
-pub use trajectory::{Jacobian6, Trajectory, TrajectoryKind, bernstein};
+pub use trajectory::{Jacobian6, Trajectory, TrajectoryKind, bernstein, uneven_speed_energy};
 
 /// Errors of the maths layer (bad sizes or degenerate geometry; never a panic on user data).
 #[derive(Debug, thiserror::Error)]

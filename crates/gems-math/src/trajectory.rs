@@ -9,7 +9,7 @@
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 use crate::MathError;
-use crate::se3::{Se3, se3_right_jacobian};
+use crate::se3::{Se3, se3_right_jacobian, se3_right_jacobian_inv};
 use crate::so3::{So3, so3_left_jacobian_inv, so3_right_jacobian, so3_right_jacobian_inv};
 
 /// Which curve family a trajectory uses.
@@ -171,6 +171,48 @@ impl Trajectory {
         }
         pose
     }
+}
+
+/// Uneven-speed energy of the poses Δ(u_k) at `times` (sorted): Σ_k ‖Log(Δ(u_k)⁻¹ Δ(u_{k+1}))‖².
+///
+/// The blur model averages the renders at the times and is blind to how a path spends its
+/// time, so a path may dwell at one end or fold back and still explain the blurry image; its
+/// pose at u = ½ is then not the middle of the exposure. Along a fixed path this energy is
+/// smallest when consecutive poses are equally far apart (for a sum of squares with a fixed sum,
+/// equal terms), and it grows with folds, so a small multiple of it fixes that gauge: u = ½
+/// becomes the middle of the path. It also pulls the path shorter, which is why its weight is
+/// small.
+///
+/// Adds `weight` × its gradient with respect to the knots to `knot_grads` (one [ρ; φ] per knot,
+/// as [`Trajectory::accumulate_knot_gradients`]) and returns `weight` × the energy.
+pub fn uneven_speed_energy(
+    traj: &Trajectory,
+    times: &[f64],
+    weight: f64,
+    knot_grads: &mut [[f64; 6]],
+) -> f64 {
+    if times.len() < 2 || weight == 0.0 {
+        return 0.0;
+    }
+    let poses: Vec<Se3> = times.iter().map(|&u| traj.eval(u)).collect();
+    // dE/dδ_k for the right perturbation δ_k of Δ(u_k).
+    let mut grads = vec![Vector6::<f64>::zeros(); times.len()];
+    let mut energy = 0.0;
+    for k in 0..times.len() - 1 {
+        // ξ = Log(C), C = A⁻¹B. Right-perturbing B: ξ + J_r⁻¹(ξ) δ_B. Right-perturbing A:
+        // Exp(−δ_A) C = C Exp(−Ad(C⁻¹) δ_A), so ξ − J_r⁻¹(ξ) Ad(C⁻¹) δ_A.
+        let c = poses[k].inverse() * poses[k + 1];
+        let xi = c.log();
+        energy += xi.norm_squared();
+        let g = se3_right_jacobian_inv(&xi).transpose() * xi * 2.0;
+        grads[k + 1] += g;
+        grads[k] -= c.inverse().adjoint().transpose() * g;
+    }
+    for (&u, g) in times.iter().zip(&grads) {
+        let g: [f64; 6] = std::array::from_fn(|i| g[i] * weight);
+        traj.accumulate_knot_gradients(u, &g, knot_grads);
+    }
+    weight * energy
 }
 
 fn bezier_with_jacobians(knots: &[[f64; 6]], u: f64) -> (Se3, Vec<Jacobian6>) {

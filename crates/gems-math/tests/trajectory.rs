@@ -219,3 +219,62 @@ fn render_gradient_to_knot_gradient_chain() {
         }
     }
 }
+
+fn times(n: usize) -> Vec<f64> {
+    (0..n).map(|k| k as f64 / (n - 1) as f64).collect()
+}
+
+/// The uneven-speed energy's knot gradient against central finite differences of the energy,
+/// for every trajectory kind.
+#[test]
+fn uneven_speed_gradient_matches_finite_differences() {
+    let ts = times(7);
+    for kind in all_kinds() {
+        let k0 = knots(kind.default_knots(), 0.2);
+        let t = Trajectory::new(kind, k0.clone()).unwrap();
+        let mut grad = vec![[0.0; 6]; k0.len()];
+        let e = uneven_speed_energy(&t, &ts, 1.5, &mut grad);
+        assert!(e > 0.0);
+        let h = 1e-6;
+        for j in 0..k0.len() {
+            for c in 0..6 {
+                let energy = |d: f64| {
+                    let mut k = k0.clone();
+                    k[j][c] += d;
+                    let t = Trajectory::new(kind, k).unwrap();
+                    uneven_speed_energy(&t, &ts, 1.5, &mut vec![[0.0; 6]; k0.len()])
+                };
+                let fd = (energy(h) - energy(-h)) / (2.0 * h);
+                assert!(
+                    (fd - grad[j][c]).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "{kind:?} knot {j} coordinate {c}: analytic {} vs finite difference {fd}",
+                    grad[j][c]
+                );
+            }
+        }
+    }
+}
+
+/// Along one straight path, evenly spaced poses have less energy than the same path walked
+/// unevenly (a dwell at one end, the blur-equivalent reparametrisation that moves u = ½ off the
+/// middle); a path that folds back costs more than the straight one; weight 0 adds nothing.
+#[test]
+fn uneven_speed_energy_is_smallest_for_even_spacing() {
+    let line = |a: f64| -> [f64; 6] { [a, 0.5 * a, 0.0, 0.0, 0.1 * a, 0.0] };
+    let ts = times(9);
+    // Linear trajectory: Δ(u) moves at constant speed from knot 0 to knot 1.
+    let even = Trajectory::new(TrajectoryKind::Linear, vec![line(-0.1), line(0.1)]).unwrap();
+    let mut g = vec![[0.0; 6]; 2];
+    let e_even = uneven_speed_energy(&even, &ts, 1.0, &mut g);
+    // The same segment walked with u² timing: the same poses set, bunched at the start.
+    let bunched: Vec<f64> = ts.iter().map(|u| u * u).collect();
+    let e_bunched = uneven_speed_energy(&even, &bunched, 1.0, &mut [[0.0; 6]; 2]);
+    assert!(e_even < e_bunched, "{e_even} vs {e_bunched}");
+    // Folding back over the first half (out to the end and back) doubles the distance covered.
+    let folded: Vec<f64> = ts.iter().map(|u| 1.0 - (2.0 * u - 1.0).abs()).collect();
+    let e_folded = uneven_speed_energy(&even, &folded, 1.0, &mut [[0.0; 6]; 2]);
+    assert!(e_folded > e_even, "{e_folded} vs {e_even}");
+    let mut zero = vec![[0.0; 6]; 2];
+    assert_eq!(uneven_speed_energy(&even, &ts, 0.0, &mut zero), 0.0);
+    assert_eq!(zero, vec![[0.0; 6]; 2]);
+}

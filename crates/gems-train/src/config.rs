@@ -74,6 +74,11 @@ pub struct PoseConfig {
     pub accumulate_steps: usize,
     /// Standard deviation of the N(0, σ²) initial knots (non-zero keeps Log/Exp away from 0/0).
     pub knot_init_std: f64,
+    /// Weight of the uneven-speed energy Σ‖Log(Δ(u_k)⁻¹Δ(u_{k+1}))‖² of each step's virtual
+    /// poses ([`gems_math::uneven_speed_energy`]), added to the loss. The blur model cannot tell
+    /// how a path spends its exposure, so without it the pose at u = ½ may sit anywhere along
+    /// the path; the energy makes it the middle. 0 = off (the GeMS paper).
+    pub uneven_speed_weight: f64,
 }
 
 impl Default for PoseConfig {
@@ -85,6 +90,7 @@ impl Default for PoseConfig {
             weight_decay: 1e-6,
             accumulate_steps: 25,
             knot_init_std: 1e-5,
+            uneven_speed_weight: 0.0,
         }
     }
 }
@@ -286,6 +292,9 @@ impl TrainConfig {
         }
         if self.pose.accumulate_steps == 0 {
             return Err("pose.accumulate_steps must be >= 1".into());
+        }
+        if !(self.pose.uneven_speed_weight.is_finite() && self.pose.uneven_speed_weight >= 0.0) {
+            return Err("pose.uneven_speed_weight must be finite and >= 0".into());
         }
         if self.mcmc.cap_max == 0 {
             return Err("mcmc.cap_max must be >= 1".into());

@@ -442,11 +442,19 @@ impl Trainer {
         for kg in &mut self.knot_grads {
             *kg = [0.0; 6];
         }
-        let (loss, train_psnr) = if self.resident.is_some() {
+        let (mut loss, train_psnr) = if self.resident.is_some() {
             self.gaussian_step_resident(v, bg, &traj, step, sh_degree)?
         } else {
             self.gaussian_step_host(v, bg, &traj, step)?
         };
+        if self.cfg.pose.optimize {
+            loss += gems_math::uneven_speed_energy(
+                &traj,
+                &self.times,
+                self.cfg.pose.uneven_speed_weight,
+                &mut self.knot_grads,
+            ) as f32;
+        }
         self.pose_update(v, step);
 
         // MCMC after the optimizer step (gsplat ≥ 1.5), with the decayed lr.
