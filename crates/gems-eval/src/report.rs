@@ -37,6 +37,9 @@ pub struct ReportInput {
     pub trajectories: Vec<Vec<[f64; 3]>>,
     /// Per view: the ground-truth mid-exposure centre when known (input frame).
     pub gt_centres: Vec<Option<[f64; 3]>>,
+    /// Per view: the ground-truth sub-frame centres in exposure order (input frame; empty when
+    /// unknown), drawn beside the estimated paths.
+    pub gt_paths: Vec<Vec<[f64; 3]>>,
     pub grid: Vec<GridRow>,
     /// The interactive 3D view (also written alone as `viewer.html`), when there is a scene.
     pub viewer: Option<crate::viewer::ViewerScene>,
@@ -150,10 +153,12 @@ fn plot_trajectories(path: &Path, input: &ReportInput) -> Result<bool, EvalError
         .map(|t| t.iter().map(map).collect())
         .collect();
     let gt: Vec<[f64; 3]> = input.gt_centres.iter().flatten().copied().collect();
+    let gt_paths: Vec<&Vec<[f64; 3]>> = input.gt_paths.iter().filter(|p| p.len() > 1).collect();
     let all: Vec<Vector3<f64>> = est
         .iter()
         .flatten()
         .chain(&gt)
+        .chain(gt_paths.iter().copied().flatten())
         .map(|p| Vector3::from(*p))
         .collect();
     if all.is_empty() || mids.is_empty() {
@@ -193,6 +198,14 @@ fn plot_trajectories(path: &Path, input: &ReportInput) -> Result<bool, EvalError
             .margin(10)
             .build_cartesian_2d(cx - half..cx + half, cy - half_y..cy + half_y)
             .map_err(|e| plot_err(path, e))?;
+        for t in &gt_paths {
+            chart
+                .draw_series(LineSeries::new(
+                    t.iter().map(proj),
+                    RGBColor(20, 150, 60).stroke_width(2),
+                ))
+                .map_err(|e| plot_err(path, e))?;
+        }
         for t in &est {
             chart
                 .draw_series(LineSeries::new(
@@ -399,8 +412,9 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
     if plot_trajectories(&fig_dir.join("trajectory.png"), input)? {
         html.push_str(
             "<h2>Trajectories</h2>\n<p>Top view on the two principal axes (equal scale). Red: estimated \
-             exposure trajectories (dot = midpoint); green circles: ground-truth centres (estimate \
-             Sim(3)-aligned to them when known).</p><img src=\"report/trajectory.png\">\n",
+             exposure trajectories (dot = midpoint); green circles: ground-truth mid-exposure \
+             centres, green lines: ground-truth sub-frame paths (estimate Sim(3)-aligned to the \
+             centres when known).</p><img src=\"report/trajectory.png\">\n",
         );
     }
     if let Some(grid) = compose_grid(&input.grid) {

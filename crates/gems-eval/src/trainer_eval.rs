@@ -453,6 +453,11 @@ pub fn report_input(
             .iter()
             .map(|v| v.c2w_gt.as_ref().map(centre))
             .collect(),
+        gt_paths: output
+            .views
+            .iter()
+            .map(|v| v.c2w_gt_subframes.iter().map(centre).collect())
+            .collect(),
         grid,
         viewer: Some(viewer_scene(output, data)),
     }

@@ -206,6 +206,7 @@ fn report_writes_html_and_figures() {
         loss: (0..100).map(|i| 1.0 / (1.0 + i as f32)).collect(),
         psnr: (0..100).map(|i| 10.0 + i as f32 * 0.1).collect(),
         gt_centres: traj.iter().map(|t| Some(t[2])).collect(),
+        gt_paths: Vec::new(),
         trajectories: traj,
         grid: vec![GridRow {
             name: "v0".into(),
@@ -240,6 +241,29 @@ fn report_writes_html_and_figures() {
     assert!(!html.contains("EDI"), "no EDI column without EDI images");
     // blurry 0.2 vs gt 0.9: 20·log10(1/0.7) = 3.10 dB; ours 0.5: 7.96 dB
     assert!(html.contains("3.10 dB") && html.contains("7.96 dB"));
+
+    // Ground-truth sub-frame paths are drawn as green lines beside the estimate.
+    let green = |dir: &std::path::Path| {
+        let im = gems_data::load_image(&dir.join("report/trajectory.png")).unwrap();
+        im.data
+            .chunks_exact(3)
+            .filter(|p| (p[0] - 20.0 / 255.0).abs() < 0.02 && (p[1] - 150.0 / 255.0).abs() < 0.02)
+            .count()
+    };
+    let mut with_paths = input.clone();
+    with_paths.gt_paths = with_paths
+        .trajectories
+        .iter()
+        .map(|t| t.iter().map(|p| [p[0], p[1] + 0.08, p[2]]).collect())
+        .collect();
+    let dir3 = tempfile::tempdir().unwrap();
+    write_report(dir3.path(), &with_paths).unwrap();
+    assert!(
+        green(dir3.path()) > green(dir.path()) + 50,
+        "{} vs {} green pixels",
+        green(dir3.path()),
+        green(dir.path())
+    );
 
     // With an EDI image the grid gains a column between the input and ours.
     let mut with_edi = input;

@@ -27,6 +27,7 @@ fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
             intrinsics: k,
             c2w_init: Pose::from(&truth),
             c2w_gt: Some(Pose::from(&truth)),
+            c2w_gt_subframes: Vec::new(),
             knots: vec![[0.0; 6]; 9],
             virtual_c2w: virt.iter().map(Pose::from).collect(),
             mid_c2w: Pose::from(&mid),

@@ -42,6 +42,7 @@ fn trained_on(scene: &gems_data::Scene, factor: u32, cfg_fov: f64) -> TrainOutpu
                 },
                 c2w_init: Pose::from(&c2w),
                 c2w_gt: v.gt_pose.map(|p| Pose::from(&Se3::from(p).inverse())),
+                c2w_gt_subframes: Vec::new(),
                 knots: vec![[0.0; 6]; 9],
                 virtual_c2w: vec![Pose::from(&c2w); 3],
                 mid_c2w: Pose::from(&c2w),

@@ -74,6 +74,7 @@ fn trainer() -> Trainer {
         intrinsics: k,
         c2w_init: c2w * Se3::exp(&Vector6::from_element(1e-3)),
         c2w_gt: None,
+        c2w_gt_subframes: Vec::new(),
     };
     let input = TrainInput {
         views: vec![view],

@@ -324,6 +324,9 @@ pub struct ViewResult {
     /// Ground truth for APE: the scene's explicit pose, else the mid sub-frame of its sub-frame
     /// poses (the mid-exposure pose).
     pub c2w_gt: Option<Pose>,
+    /// Ground-truth poses of the exposure's sharp sub-frames in time order (empty when unknown).
+    #[serde(default)]
+    pub c2w_gt_subframes: Vec<Pose>,
     /// Trajectory knots [ρ; φ].
     pub knots: Vec<[f64; 6]>,
     /// The n virtual camera poses c2w_init·Δ(u_k), u_k = linspace(0, 1, n).
@@ -389,6 +392,7 @@ impl TrainOutput {
                     intrinsics: view.intrinsics,
                     c2w_init: Pose::from(&view.c2w_init),
                     c2w_gt: view.c2w_gt.as_ref().map(Pose::from),
+                    c2w_gt_subframes: view.c2w_gt_subframes.iter().map(Pose::from).collect(),
                     knots: traj.knots().to_vec(),
                     virtual_c2w: t.virtual_poses(v).iter().map(Pose::from).collect(),
                     mid_c2w: Pose::from(&t.mid_pose(v)),

@@ -59,6 +59,19 @@ impl InitMode {
     }
 }
 
+/// A training view as read from the scene, before normalisation.
+struct RawView {
+    name: String,
+    image: Vec<f32>,
+    intrinsics: Intrinsics,
+    /// Initial camera-to-world pose.
+    c2w: Se3,
+    /// Ground-truth mid-exposure camera-to-world pose ([`gt_c2w`]).
+    gt: Option<Se3>,
+    /// Ground-truth camera-to-world poses of the sharp sub-frames, in time order.
+    gt_subframes: Vec<Se3>,
+}
+
 fn c2w_of(p: &DataPose) -> Se3 {
     Se3::from_arrays(&p.rotation, &p.translation).inverse()
 }
@@ -212,13 +225,14 @@ pub fn prepare_input(
             width: k.width,
             height: k.height,
         };
-        raw.push((
-            v.name.clone(),
-            img.data,
-            intr,
-            c2w_of(&pose),
-            gt_c2w(v.gt_pose.as_ref(), v.gt_subframe_poses.as_deref()),
-        ));
+        raw.push(RawView {
+            name: v.name.clone(),
+            image: img.data,
+            intrinsics: intr,
+            c2w: c2w_of(&pose),
+            gt: gt_c2w(v.gt_pose.as_ref(), v.gt_subframe_poses.as_deref()),
+            gt_subframes: v.gt_subframe_poses.iter().flatten().map(c2w_of).collect(),
+        });
     }
     if !unregistered.is_empty() {
         tracing::warn!(
@@ -238,7 +252,7 @@ pub fn prepare_input(
     }
 
     let poses: Vec<(Matrix3<f64>, Vector3<f64>)> =
-        raw.iter().map(|r| (r.3.rot, r.3.trans)).collect();
+        raw.iter().map(|r| (r.c2w.rot, r.c2w.trans)).collect();
     let norm = if cfg.normalize.enabled {
         Normalization::from_cameras(&poses, cfg.normalize.scale_factor)
     } else {
@@ -250,7 +264,15 @@ pub fn prepare_input(
     };
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x006e_6f69_7365);
     let mut views = Vec::with_capacity(raw.len());
-    for (name, image, intrinsics, c2w, gt) in raw {
+    for RawView {
+        name,
+        image,
+        intrinsics,
+        c2w,
+        gt,
+        gt_subframes,
+    } in raw
+    {
         let mut c2w_init = to_norm(&c2w);
         if let InitMode::GtNoisy {
             translation_std,
@@ -276,6 +298,7 @@ pub fn prepare_input(
             intrinsics,
             c2w_init,
             c2w_gt: gt.as_ref().map(to_norm),
+            c2w_gt_subframes: gt_subframes.iter().map(to_norm).collect(),
         });
     }
     let centre = views

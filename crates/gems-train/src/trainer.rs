@@ -59,6 +59,9 @@ pub struct TrainView {
     pub c2w_init: Se3,
     /// Ground-truth mid-exposure camera-to-world pose when known (for APE).
     pub c2w_gt: Option<Se3>,
+    /// Ground-truth camera-to-world poses of the exposure's sharp sub-frames, in time order
+    /// (empty when unknown), for the report's trajectory plot.
+    pub c2w_gt_subframes: Vec<Se3>,
 }
 
 /// Everything training starts from.

@@ -3,7 +3,7 @@
 //! steps, and the PLY export landing back in the input frame.
 
 use gems_data::OpenOptions;
-use gems_math::Vector3;
+use gems_math::{Se3, Vector3};
 use gems_train::TrainConfig;
 use gems_train::io::TrainOutput;
 use gems_train::prepare::{InitMode, prepare_input};
@@ -39,6 +39,19 @@ fn synth_scene_prepares_normalises_and_trains() {
     // With GT init the initial pose is the ground truth.
     let d = gt.views[0].c2w_init.inverse() * gt.views[0].c2w_gt.unwrap();
     assert!(d.log().norm() < 1e-9);
+    // The ground-truth sub-frames come along, normalised like the poses: the generated scene's
+    // mid-exposure pose lies between its two middle sub-frames (an even count).
+    let subs = &gt.views[0].c2w_gt_subframes;
+    assert!(subs.len() >= 2 && subs.len().is_multiple_of(2), "{}", subs.len());
+    let (a, b) = (subs[subs.len() / 2 - 1], subs[subs.len() / 2]);
+    let half = a * Se3::exp(&((a.inverse() * b).log() * 0.5));
+    let d = half.inverse() * gt.views[0].c2w_gt.unwrap();
+    let step = (a.inverse() * b).log().norm();
+    assert!(
+        d.log().norm() < 0.25 * step,
+        "{} vs step {step}",
+        d.log().norm()
+    );
     assert!(gt.gaussians.len() > 10, "points from gt/sparse/0");
 
     let noisy = prepare_input(

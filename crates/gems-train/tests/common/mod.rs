@@ -199,6 +199,7 @@ pub fn blur_scene(
             intrinsics: k,
             c2w_init: mid * Se3::exp(&tangent(noise)),
             c2w_gt: Some(mid),
+            c2w_gt_subframes: Vec::new(),
         });
         out.sharp.push(sharp);
         out.gt_mid.push(mid);
