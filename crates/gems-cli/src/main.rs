@@ -38,6 +38,9 @@ enum Command {
     Eval(commands::eval::Args),
     /// Export a trained result's Gaussians as PLY or web `.splat` for other viewers.
     Export(commands::export::Args),
+    /// Quality benchmark: GeMS from the built-in SfM and from ground-truth poses against the
+    /// blurry input and the sharp-input ceiling, on generated scenes of several seeds.
+    BenchQuality(commands::bench_quality::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -52,6 +55,7 @@ fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo(a) => commands::demo::run(a),
+        Command::BenchQuality(a) => commands::bench_quality::run(a),
         Command::Render(a) => commands::render::run(a),
         Command::Info(a) => commands::info::run(a),
         Command::Synth(a) => commands::synth::run(a),

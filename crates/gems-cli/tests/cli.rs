@@ -801,3 +801,53 @@ fn device_gpu_trains_evaluates_and_renders() {
         );
     }
 }
+
+/// `gems bench-quality` on one tiny scene with a few steps: the four rows per seed in both
+/// outputs, and a ceiling scene whose images are the sharp frames, without the blurry
+/// exposures' events.
+#[test]
+fn bench_quality_writes_the_four_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bench");
+    ok(&gems(&[
+        "bench-quality",
+        "-o",
+        s(&out),
+        "--seeds",
+        "3",
+        "--preset",
+        "tiny",
+        "--steps",
+        "3",
+    ]));
+    let table = std::fs::read_to_string(out.join("quality.md")).unwrap();
+    let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| 3 |")).collect();
+    assert_eq!(rows.len(), 4, "{table}");
+    for (row, name) in rows.iter().zip([
+        "blurry input",
+        "GeMS, built-in SfM",
+        "GeMS, ground-truth poses",
+        "sharp ceiling",
+    ]) {
+        assert!(row.contains(name) && row.contains(" dB"), "{row}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("quality.json")).unwrap()).unwrap();
+    let runs = json.as_array().unwrap();
+    assert_eq!(runs.len(), 4);
+    assert!(runs[2]["ape_rmse"].as_f64().unwrap() < 1e-2, "{}", runs[2]);
+    let sharp = out.join("seed3/sharp");
+    let scene = out.join("seed3/scene");
+    for e in std::fs::read_dir(scene.join("images_test")).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap();
+        assert_eq!(
+            std::fs::read(&p).unwrap(),
+            std::fs::read(sharp.join("images").join(name)).unwrap()
+        );
+    }
+    assert!(!sharp.join("events.npz").exists() && sharp.join("gt/sparse/0").is_dir());
+    // A second run into the same folder is refused.
+    let again = gems(&["bench-quality", "-o", s(&out), "--preset", "tiny"]);
+    assert!(!again.status.success());
+}

@@ -42,7 +42,11 @@ fn synth_scene_prepares_normalises_and_trains() {
     // The ground-truth sub-frames come along, normalised like the poses: the generated scene's
     // mid-exposure pose lies between its two middle sub-frames (an even count).
     let subs = &gt.views[0].c2w_gt_subframes;
-    assert!(subs.len() >= 2 && subs.len().is_multiple_of(2), "{}", subs.len());
+    assert!(
+        subs.len() >= 2 && subs.len().is_multiple_of(2),
+        "{}",
+        subs.len()
+    );
     let (a, b) = (subs[subs.len() / 2 - 1], subs[subs.len() / 2]);
     let half = a * Se3::exp(&((a.inverse() * b).log() * 0.5));
     let d = half.inverse() * gt.views[0].c2w_gt.unwrap();

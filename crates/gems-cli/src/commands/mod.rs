@@ -1,4 +1,5 @@
 //! One module per subcommand; each exposes `Args` (clap) and `run`.
+pub mod bench_quality;
 pub mod demo;
 pub mod edi;
 pub mod eval;

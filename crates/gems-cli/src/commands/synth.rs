@@ -6,14 +6,24 @@ use std::path::PathBuf;
 use anyhow::Context;
 use gems_synth::{EventOptions, Preset, SynthConfig};
 
-#[derive(Clone, Copy, clap::ValueEnum)]
-enum PresetArg {
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub(crate) enum PresetArg {
     /// 96×64, 8 views, 12 px blur (sub-second).
     Tiny,
     /// 240×160, 16 views, 30 px blur (a few seconds; the demo scene).
     Small,
     /// 400×270, 24 views, 45 px blur (ExBluRF size at data factor 2).
     Medium,
+}
+
+impl PresetArg {
+    pub(crate) fn preset(self) -> Preset {
+        match self {
+            PresetArg::Tiny => Preset::Tiny,
+            PresetArg::Small => Preset::Small,
+            PresetArg::Medium => Preset::Medium,
+        }
+    }
 }
 
 /// Arguments of `gems synth`.
@@ -77,12 +87,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let preset = match args.preset {
-        PresetArg::Tiny => Preset::Tiny,
-        PresetArg::Small => Preset::Small,
-        PresetArg::Medium => Preset::Medium,
-    };
-    let mut cfg = SynthConfig::preset(preset);
+    let mut cfg = SynthConfig::preset(args.preset.preset());
     cfg.seed = args.seed;
     cfg.width = args.width.unwrap_or(cfg.width);
     cfg.height = args.height.unwrap_or(cfg.height);

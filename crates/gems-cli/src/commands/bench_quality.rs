@@ -1,0 +1,290 @@
+//! `gems bench-quality`: how far GeMS is from what the same engine reaches on sharp inputs.
+//!
+//! On `gems synth` scenes of several seeds, at one schedule, four rows per seed:
+//! 1. the blurry input against the sharp ground truth (where a user starts);
+//! 2. GeMS initialised by the built-in SfM on the blurry images;
+//! 3. GeMS initialised by the ground-truth poses;
+//! 4. the sharp ceiling: the same engine and schedule with n = 1 on the sharp mid-exposure frames,
+//!    SfM on them.
+//!
+//! Columns: deblurring at the trajectory midpoint and after the GeMS authors' 100-step pose
+//! refinement, novel views refined and at their initial pose, APE, and the wall time of training
+//! plus evaluation. Writes `quality.md` (the table) and `quality.json` into the output folder;
+//! every run keeps its own folder (metrics, report) beside them.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use gems_eval::MetricsReport;
+use gems_synth::SynthConfig;
+use gems_train::TrainConfig;
+use gems_train::prepare::InitMode;
+use serde::Serialize;
+
+use super::pipeline::{TrainJob, train_and_report};
+
+/// Arguments of `gems bench-quality`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Output folder (must not exist or be empty).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Scene seeds, one scene each.
+    #[arg(long, value_delimiter = ',', default_values_t = [1u64, 2])]
+    pub seeds: Vec<u64>,
+    /// Scene preset (sizes below override it).
+    #[arg(long, value_enum, default_value = "small")]
+    pub preset: super::synth::PresetArg,
+    /// Image width in pixels.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels.
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Training steps of every run.
+    #[arg(long, default_value_t = 1500)]
+    pub steps: usize,
+    /// TOML configuration of every run (missing fields take the defaults); the ceiling run
+    /// takes it with `num_virtual_views = 1`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Where the splatting runs (see `gems train --device`).
+    #[arg(long, default_value = "auto")]
+    pub device: gems_gpu::DeviceChoice,
+}
+
+/// One row of the table.
+#[derive(Debug, Serialize)]
+struct Row {
+    seed: u64,
+    run: &'static str,
+    deblur_midpoint: Option<f64>,
+    deblur_refined: Option<f64>,
+    nvs_refined: Option<f64>,
+    nvs_initial: Option<f64>,
+    ape_rmse: Option<f64>,
+    seconds: Option<f64>,
+    /// Why the run has no figures (e.g. the SfM failed).
+    failure: Option<String>,
+}
+
+impl Row {
+    fn from_metrics(seed: u64, run: &'static str, m: &MetricsReport, seconds: f64) -> Self {
+        Row {
+            seed,
+            run,
+            deblur_midpoint: m.deblur.as_ref().map(|s| s.psnr),
+            deblur_refined: m.deblur_refined.as_ref().map(|s| s.psnr),
+            nvs_refined: m.nvs.as_ref().map(|s| s.psnr),
+            nvs_initial: m.nvs_no_pose_opt.as_ref().map(|s| s.psnr),
+            ape_rmse: m.ape.as_ref().map(|a| a.rmse),
+            seconds: Some(seconds),
+            failure: None,
+        }
+    }
+
+    fn failed(seed: u64, run: &'static str, why: String) -> Self {
+        Row {
+            seed,
+            run,
+            deblur_midpoint: None,
+            deblur_refined: None,
+            nvs_refined: None,
+            nvs_initial: None,
+            ape_rmse: None,
+            seconds: None,
+            failure: Some(why),
+        }
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let out = &args.output;
+    if out.exists() && std::fs::read_dir(out)?.next().is_some() {
+        anyhow::bail!("{} exists and is not empty", out.display());
+    }
+    let base = match &args.config {
+        Some(p) => TrainConfig::from_toml_file(p)?,
+        None => TrainConfig::default(),
+    };
+    let mut rows = Vec::new();
+    for &seed in &args.seeds {
+        let dir = out.join(format!("seed{seed}"));
+        let mut synth = SynthConfig::preset(args.preset.preset());
+        synth.seed = seed;
+        synth.width = args.width.unwrap_or(synth.width);
+        synth.height = args.height.unwrap_or(synth.height);
+        let scene = dir.join("scene");
+        let summary = gems_synth::generate(&synth, &scene)?;
+        let sharp = dir.join("sharp");
+        sharp_scene(&scene, &sharp)?;
+        let cfg = TrainConfig {
+            steps: args.steps,
+            seed,
+            ..base.clone()
+        };
+        let focal = Some(summary.intrinsics.fx);
+        let sfm_row = |name: &'static str, scene: &Path, out: &Path, cfg: &TrainConfig| {
+            match super::train::run_sfm(scene, &out.join("sfm"), seed, focal) {
+                Ok(model) => train_row(
+                    seed,
+                    name,
+                    scene,
+                    out,
+                    InitMode::Colmap(Some(model)),
+                    cfg,
+                    args.device,
+                ),
+                Err(e) => Ok(Row::failed(seed, name, format!("SfM failed: {e:#}"))),
+            }
+        };
+        let gems_sfm = sfm_row("GeMS, built-in SfM", &scene, &dir.join("gems_sfm"), &cfg)?;
+        let input = read_metrics(&dir.join("gems_sfm"))
+            .ok()
+            .and_then(|m| m.input);
+        rows.push(Row {
+            deblur_midpoint: input.map(|s| s.psnr),
+            ..Row::failed(seed, "blurry input", String::new())
+        });
+        rows.push(gems_sfm);
+        rows.push(train_row(
+            seed,
+            "GeMS, ground-truth poses",
+            &scene,
+            &dir.join("gems_gt"),
+            InitMode::Gt,
+            &cfg,
+            args.device,
+        )?);
+        let ceiling = TrainConfig {
+            num_virtual_views: 1,
+            ..cfg.clone()
+        };
+        rows.push(sfm_row(
+            "sharp ceiling (n = 1, sharp frames, SfM)",
+            &sharp,
+            &dir.join("ceiling"),
+            &ceiling,
+        )?);
+    }
+    for r in &mut rows {
+        if r.failure.as_deref() == Some("") {
+            r.failure = None;
+        }
+    }
+    let table = markdown(&rows, &args);
+    gems_data::write_atomic(&out.join("quality.md"), table.as_bytes())?;
+    let json = serde_json::to_string_pretty(&rows)?;
+    gems_data::write_atomic(&out.join("quality.json"), json.as_bytes())?;
+    println!("{table}");
+    println!("written to {}", out.join("quality.md").display());
+    Ok(())
+}
+
+/// Trains and evaluates one run, timing both.
+fn train_row(
+    seed: u64,
+    name: &'static str,
+    scene: &Path,
+    out: &Path,
+    mode: InitMode,
+    cfg: &TrainConfig,
+    device: gems_gpu::DeviceChoice,
+) -> anyhow::Result<Row> {
+    tracing::info!(seed, run = name, "bench-quality run");
+    let start = Instant::now();
+    train_and_report(TrainJob {
+        scene,
+        output: out,
+        mode,
+        cfg: cfg.clone(),
+        open: gems_data::OpenOptions::default(),
+        resume: false,
+        evaluate: true,
+        lpips: &[],
+        device,
+    })?;
+    let seconds = start.elapsed().as_secs_f64();
+    Ok(Row::from_metrics(seed, name, &read_metrics(out)?, seconds))
+}
+
+fn read_metrics(run: &Path) -> anyhow::Result<MetricsReport> {
+    let path = run.join("metrics.json");
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+}
+
+/// A copy of a generated scene whose `images/` are its sharp mid-exposure frames (the input of
+/// the sharp ceiling); events are left out (they belong to the blurry exposures).
+fn sharp_scene(scene: &Path, sharp: &Path) -> anyhow::Result<()> {
+    copy_dir(scene, sharp, &|rel: &Path| {
+        !(rel.starts_with("images")
+            || rel.starts_with("events.npz")
+            || rel.starts_with("exposure_start_ts.txt")
+            || rel.starts_with("exposure_end_ts.txt"))
+            || rel.starts_with("images_test")
+    })?;
+    copy_dir(&scene.join("images_test"), &sharp.join("images"), &|_| true)
+}
+
+/// Copies the files under `from` whose path relative to it `keep` accepts.
+fn copy_dir(from: &Path, to: &Path, keep: &dyn Fn(&Path) -> bool) -> anyhow::Result<()> {
+    let mut stack = vec![from.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).with_context(|| format!("reading {}", d.display()))? {
+            let p = e?.path();
+            let rel = p.strip_prefix(from).unwrap_or(&p).to_path_buf();
+            if !keep(&rel) {
+                continue;
+            }
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let dst = to.join(&rel);
+                if let Some(parent) = dst.parent() {
+                    std::fs::create_dir_all(parent)
+                        .with_context(|| format!("creating {}", parent.display()))?;
+                }
+                std::fs::copy(&p, &dst)
+                    .with_context(|| format!("copying {} to {}", p.display(), dst.display()))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+fn markdown(rows: &[Row], args: &Args) -> String {
+    let f = |v: Option<f64>, unit: &str| v.map_or("—".to_owned(), |v| format!("{v:.2}{unit}"));
+    let mut s = format!(
+        "Schedule: {} steps; scenes: `gems synth --preset {}`{}, seeds {:?}.\n\n\
+         | seed | run | deblur midpoint | deblur refined | novel views refined | novel views at initial pose | APE RMSE | wall time |\n\
+         |---|---|---|---|---|---|---|---|\n",
+        args.steps,
+        format!("{:?}", args.preset).to_lowercase(),
+        match (args.width, args.height) {
+            (Some(w), Some(h)) => format!(" at {w}×{h}"),
+            _ => String::new(),
+        },
+        args.seeds
+    );
+    for r in rows {
+        if let Some(why) = &r.failure {
+            s.push_str(&format!("| {} | {} | {why} | | | | | |\n", r.seed, r.run));
+            continue;
+        }
+        s.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            r.seed,
+            r.run,
+            f(r.deblur_midpoint, " dB"),
+            f(r.deblur_refined, " dB"),
+            f(r.nvs_refined, " dB"),
+            f(r.nvs_initial, " dB"),
+            r.ape_rmse.map_or("—".to_owned(), |v| format!("{v:.4}")),
+            f(r.seconds, " s"),
+        ));
+    }
+    s
+}
