@@ -189,90 +189,15 @@ impl ResidentStep {
             )));
         }
         let read_before = r.bytes_read_back();
-        if self.grads.capacity() < self.gaussians.len() {
-            self.grads = GpuGradients::new(&self.ctx, self.gaussians.capacity())?;
-        }
         let li = self.loss_for(h, w, nc, s.ssim_lambda)?;
         let target_buf = self.target(view, target)?;
         let bgs = vec![background; nc];
-        let pose = sized(
-            &self.ctx,
-            &mut self.pose,
-            "pose gradients",
-            nc * POSE_FLOATS,
-        )?;
 
-        // Forward, shrinking the chunks until every call fits the adapter.
-        let renders = loop {
-            match self.forward_all(r, cams, &bgs, &s.render) {
-                Err(GpuError::Capacity(why)) if self.max_cameras.min(nc) > 1 => {
-                    self.max_cameras = self.max_cameras.min(nc).div_ceil(2);
-                    tracing::debug!(
-                        cameras = self.max_cameras,
-                        "renderer call too large ({why}); splitting the cameras"
-                    );
-                }
-                other => break other?,
-            }
-        };
+        let renders = self.render(r, cams, &bgs, &s.render)?;
         let loss = &self.losses[li].1;
         loss.run(&self.ctx, &renders, &target_buf)?;
-
-        // Backward, chunk by chunk in camera order.
-        let chunk = self.max_cameras.min(nc);
         let d_renders = loss.d_renders().clone();
-        if chunk == nc {
-            let d = loss.d_renders_batch();
-            r.backward_resident(
-                &self.gaussians,
-                cams,
-                &bgs,
-                &d,
-                &self.grads,
-                CameraChunk::WHOLE,
-            )?;
-            self.copy(r.pose_gradients()?, 0, &pose, 0, nc * POSE_FLOATS);
-        } else {
-            let d_chunk = sized(
-                &self.ctx,
-                &mut self.d_chunk,
-                "chunk dL/drender",
-                chunk * len,
-            )?;
-            let starts: Vec<usize> = (0..nc).step_by(chunk).collect();
-            for (k, &a) in starts.iter().enumerate() {
-                let b = (a + chunk).min(nc);
-                if k > 0 {
-                    r.forward_resident(&self.gaussians, &cams[a..b], &bgs[a..b], &s.render)?;
-                }
-                self.copy(&d_renders, a * len, &d_chunk, 0, (b - a) * len);
-                let batch = ImageBatch {
-                    buffer: d_chunk.clone(),
-                    count: b - a,
-                    width: w as u32,
-                    height: h as u32,
-                };
-                let part = CameraChunk {
-                    first: k == 0,
-                    last: b == nc,
-                };
-                r.backward_resident(
-                    &self.gaussians,
-                    &cams[a..b],
-                    &bgs[a..b],
-                    &batch,
-                    &self.grads,
-                    part,
-                )?;
-                self.copy(
-                    r.pose_gradients()?,
-                    0,
-                    &pose,
-                    a * POSE_FLOATS,
-                    (b - a) * POSE_FLOATS,
-                );
-            }
-        }
+        let pose = self.backpropagate(r, cams, &bgs, &d_renders, &s.render)?;
 
         // Regularisers and Adam, then the one read-back of the step.
         let mut enc = buffers::encoder(&self.ctx, "resident step");
@@ -316,6 +241,128 @@ impl ResidentStep {
                 .map(|p| [p[9], p[10], p[11]])
                 .collect(),
         })
+    }
+
+    /// The forward half of [`Self::step`]: renders the resident Gaussians from every camera
+    /// into one `[n,H,W,3]` batch (valid until the next call), in camera chunks when one call
+    /// exceeds the adapter's limits (module docs). Exposed for benchmarks.
+    pub fn render(
+        &mut self,
+        r: &mut GpuRenderer,
+        cams: &[Camera],
+        bgs: &[[f32; 3]],
+        s: &RenderSettings,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        let nc = cams.len();
+        loop {
+            match self.forward_all(r, cams, bgs, s) {
+                Err(GpuError::Capacity(why)) if self.max_cameras.min(nc) > 1 => {
+                    self.max_cameras = self.max_cameras.min(nc).div_ceil(2);
+                    tracing::debug!(
+                        cameras = self.max_cameras,
+                        "renderer call too large ({why}); splitting the cameras"
+                    );
+                }
+                other => return other,
+            }
+        }
+    }
+
+    /// The backward half of [`Self::step`], right after [`Self::render`] of the same cameras:
+    /// writes the Gaussian gradients of `dL/d(render)` (`d_renders`, `[n,H,W,3]`) to the
+    /// resident gradient buffers and returns the buffer of the per-camera pose gradients
+    /// (`[n,12]`: dL/dR row-major, dL/dt). Chunked like the render, first chunk first (its
+    /// forward state is the renderer's; the others are rendered again). Exposed for
+    /// benchmarks.
+    pub fn backpropagate(
+        &mut self,
+        r: &mut GpuRenderer,
+        cams: &[Camera],
+        bgs: &[[f32; 3]],
+        d_renders: &wgpu::Buffer,
+        s: &RenderSettings,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        let nc = cams.len();
+        let first = cams
+            .first()
+            .ok_or_else(|| GpuError::Shape("a step needs at least one camera".into()))?;
+        let (w, h) = (first.width, first.height);
+        let len = (w * h * 3) as usize;
+        if d_renders.size() < (nc * len * 4) as u64 {
+            return Err(GpuError::Shape(format!(
+                "dL/drender holds {} values, {nc} images of {w}x{h} need {}",
+                d_renders.size() / 4,
+                nc * len
+            )));
+        }
+        if self.grads.capacity() < self.gaussians.len() {
+            self.grads = GpuGradients::new(&self.ctx, self.gaussians.capacity())?;
+        }
+        let pose = sized(
+            &self.ctx,
+            &mut self.pose,
+            "pose gradients",
+            nc * POSE_FLOATS,
+        )?;
+        let chunk = self.max_cameras.min(nc);
+        if chunk == nc {
+            let d = ImageBatch {
+                buffer: d_renders.clone(),
+                count: nc,
+                width: w,
+                height: h,
+            };
+            r.backward_resident(
+                &self.gaussians,
+                cams,
+                bgs,
+                &d,
+                &self.grads,
+                CameraChunk::WHOLE,
+            )?;
+            self.copy(r.pose_gradients()?, 0, &pose, 0, nc * POSE_FLOATS);
+            return Ok(pose);
+        }
+        let d_chunk = sized(
+            &self.ctx,
+            &mut self.d_chunk,
+            "chunk dL/drender",
+            chunk * len,
+        )?;
+        let starts: Vec<usize> = (0..nc).step_by(chunk).collect();
+        for (k, &a) in starts.iter().enumerate() {
+            let b = (a + chunk).min(nc);
+            if k > 0 {
+                r.forward_resident(&self.gaussians, &cams[a..b], &bgs[a..b], s)?;
+            }
+            self.copy(d_renders, a * len, &d_chunk, 0, (b - a) * len);
+            let batch = ImageBatch {
+                buffer: d_chunk.clone(),
+                count: b - a,
+                width: w,
+                height: h,
+            };
+            let part = CameraChunk {
+                first: k == 0,
+                last: b == nc,
+            };
+            r.backward_resident(
+                &self.gaussians,
+                &cams[a..b],
+                &bgs[a..b],
+                &batch,
+                &self.grads,
+                part,
+            )?;
+            self.copy(
+                r.pose_gradients()?,
+                0,
+                &pose,
+                a * POSE_FLOATS,
+                (b - a) * POSE_FLOATS,
+            );
+        }
+        Ok(pose)
     }
 
     /// Renders every camera into one batch, in chunks of at most `max_cameras` (last chunk

@@ -2,11 +2,18 @@
 //! (render 15 views in one call, mean, fused loss, backward through the blur model, Adam on
 //! every group, pose accumulation, SGLD noise). MCMC refinement is outside the timed window
 //! (cap_max = N, so growth is a no-op; relocation runs only every 100 steps in the defaults).
+//!
+//! `step_…` runs the CPU engine; `gpu_step_…` the same trainer on the GPU engine (any adapter,
+//! lavapipe included: `WGPU_BACKEND=vulkan`), whose step is resident (gems-gpu
+//! `ResidentStep`); its first step, which uploads the Gaussians and the image, is outside the
+//! timed window.
 
+use gems_gpu::DeviceChoice;
 use gems_math::{Se3, Vector6};
 use gems_splat::{Gaussians, RenderSettings, Renderer};
 use gems_train::TrainConfig;
 use gems_train::blur::{Intrinsics, camera_from_c2w};
+use gems_train::engine::Engine;
 use gems_train::normalize::Normalization;
 use gems_train::trainer::{TrainInput, TrainView, Trainer};
 use rand::{RngExt, SeedableRng};
@@ -92,5 +99,15 @@ fn trainer() -> Trainer {
 #[divan::bench(sample_count = 3, sample_size = 1)]
 fn step_400x270_100k_n15(bencher: divan::Bencher) {
     let mut t = trainer();
+    bencher.bench_local(|| t.step().unwrap());
+}
+
+#[divan::bench(sample_count = 3, sample_size = 1)]
+fn gpu_step_400x270_100k_n15(bencher: divan::Bencher) {
+    let mut t = trainer();
+    let engine = Engine::select(DeviceChoice::Gpu).expect("a GPU adapter");
+    println!("{}", engine.describe());
+    t.set_engine(engine);
+    t.step().unwrap();
     bencher.bench_local(|| t.step().unwrap());
 }
