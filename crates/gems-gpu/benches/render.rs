@@ -49,11 +49,14 @@ fn resident(
     let ctx = context();
     let mut r = GpuRenderer::new(&ctx);
     let mut step = ResidentStep::new(&ctx, &g, None).unwrap();
-    step.render(&mut r, &cams, &bgs, &RenderSettings::default())
-        .unwrap();
+    let s = RenderSettings::default();
+    let d_rgb = buffers::upload(&ctx, "dL/dRGB", &vec![1e-3f32; CAMERAS * 400 * 270 * 3]).unwrap();
+    step.render(&mut r, &cams, &bgs, &s).unwrap();
+    step.backpropagate(&mut r, &cams, &bgs, &d_rgb, &s).unwrap();
     println!(
-        "{n} Gaussians: {} cameras per call",
-        step.max_cameras_per_call().min(CAMERAS)
+        "{n} Gaussians: {} cameras per call; GPU buffers after a forward+backward: {} MiB",
+        step.max_cameras_per_call().min(CAMERAS),
+        (r.allocated_bytes() + step.allocated_bytes()) >> 20
     );
     (ctx, r, step, cams, bgs)
 }

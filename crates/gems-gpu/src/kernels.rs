@@ -232,11 +232,11 @@ impl Resident {
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
         if bytes > max {
-            return Err(GpuError::Capacity(format!(
-                "{} needs {bytes} bytes but the adapter binds at most {max}; render fewer \
-                 cameras or Gaussians per call",
-                self.label
-            )));
+            return Err(GpuError::Capacity {
+                what: format!("{} (bytes)", self.label),
+                needed: bytes,
+                limit: max,
+            });
         }
         if self.buffer.as_ref().is_none_or(|b| b.size() < bytes) {
             // Grow with headroom so that slowly growing scenes do not reallocate every call.
@@ -251,6 +251,11 @@ impl Resident {
             }));
         }
         Ok(self.get())
+    }
+
+    /// Bytes allocated (0 before the first [`Resident::ensure`]).
+    pub fn allocated(&self) -> u64 {
+        self.buffer.as_ref().map_or(0, |b| b.size())
     }
 
     /// The buffer; only after [`Resident::ensure`].

@@ -105,8 +105,16 @@ pub enum GpuError {
     /// One render call needs a buffer larger than the adapter can bind: fewer cameras per
     /// call (see [`ResidentStep`], which splits its batches into camera chunks) or fewer
     /// Gaussians.
-    #[error("too large for the adapter: {0}")]
-    Capacity(String),
+    #[error(
+        "too large for the adapter: {what} needs {needed}, the adapter allows {limit}; render \
+         fewer cameras or Gaussians per call"
+    )]
+    Capacity {
+        /// What did not fit, with its unit.
+        what: String,
+        needed: u64,
+        limit: u64,
+    },
     /// The CPU-side validation of the inputs failed (same rules as the CPU engine).
     #[error(transparent)]
     Splat(#[from] gems_splat::SplatError),

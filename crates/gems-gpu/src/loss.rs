@@ -210,6 +210,24 @@ impl BlurLoss {
         self.lambda
     }
 
+    /// Bytes of GPU memory the loss's buffers hold.
+    pub fn allocated_bytes(&self) -> u64 {
+        [
+            &self.horiz,
+            &self.dmap,
+            &self.ssim_values,
+            &self.back,
+            &self.partials,
+            &self.blurred,
+            &self.d_blurred,
+            &self.d_renders,
+            &self.scalars,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum()
+    }
+
     /// The blurred image `[H,W,3]` of the last evaluation.
     pub fn blurred(&self) -> &wgpu::Buffer {
         &self.blurred

@@ -125,6 +125,43 @@ struct Buffers {
 }
 
 impl Buffers {
+    fn allocated(&self) -> u64 {
+        let all = [
+            &self.gaussians,
+            &self.cams,
+            &self.splats,
+            &self.radii,
+            &self.offsets,
+            &self.key_lo[0],
+            &self.key_lo[1],
+            &self.key_hi[0],
+            &self.key_hi[1],
+            &self.vals[0],
+            &self.vals[1],
+            &self.owner,
+            &self.histogram,
+            &self.ranges,
+            &self.sorted_splat,
+            &self.sorted_pos,
+            &self.rgb,
+            &self.aux,
+            &self.d_rgb,
+            &self.d_alpha,
+            &self.entry_grads,
+            &self.splat_grads,
+            &self.grads,
+            &self.stats,
+            &self.pose_parts,
+            &self.pose,
+            &self.bg_grads,
+            &self.carry,
+        ];
+        all.iter()
+            .chain(self.scan_levels.iter().collect::<Vec<_>>().iter())
+            .map(|r| r.allocated())
+            .sum()
+    }
+
     fn new() -> Self {
         Buffers {
             gaussians: Resident::new("gaussians"),
@@ -223,6 +260,12 @@ impl GpuRenderer {
     /// The device and queue the engine runs on.
     pub fn context(&self) -> &GpuContext {
         &self.ctx
+    }
+
+    /// Bytes of GPU memory the engine's buffers hold now (they grow to the largest call so
+    /// far and are kept).
+    pub fn allocated_bytes(&self) -> u64 {
+        self.bufs.allocated()
     }
 
     /// Bytes this engine has copied back to the CPU so far (images, gradients, and the one
@@ -355,10 +398,13 @@ impl GpuRenderer {
         let mut p = params_for(n, nc, width, height, src.sh_degree(), s);
         let tiles = (p.tiles_x * p.tiles_y) as usize;
         let pairs = nc * n;
-        if pairs as u64 >= u32::MAX as u64 || (nc * tiles) as u64 >= u32::MAX as u64 {
-            return Err(GpuError::Capacity(format!(
-                "{nc} cameras × {n} Gaussians is too large for one call"
-            )));
+        let indices = pairs.max(nc * tiles) as u64;
+        if indices >= u32::MAX as u64 {
+            return Err(GpuError::Capacity {
+                what: format!("{nc} cameras × {n} Gaussians (32-bit indices)"),
+                needed: indices,
+                limit: u32::MAX as u64 - 1,
+            });
         }
         let pixels = (nc * width as usize * height as usize) as u64;
         let (dev, lim) = (&self.ctx.device, &self.ctx.limits);
@@ -452,11 +498,11 @@ impl GpuRenderer {
         // entry-sized buffer: refuse here, before anything is sorted, when they cannot be bound.
         let max_binding = lim.max_storage_buffer_binding_size.min(lim.max_buffer_size);
         if total * SG * 4 > max_binding {
-            return Err(GpuError::Capacity(format!(
-                "{total} tile entries of {nc} cameras need {} bytes of gradients; the adapter \
-                 binds at most {max_binding}",
-                total * SG * 4
-            )));
+            return Err(GpuError::Capacity {
+                what: format!("the gradients of {total} tile entries of {nc} cameras (bytes)"),
+                needed: total * SG * 4,
+                limit: max_binding,
+            });
         }
 
         let mut enc = dev.create_command_encoder(&Default::default());

@@ -16,12 +16,17 @@
 //!
 //! Camera chunks: when one call over all n cameras needs a buffer larger than the adapter can
 //! bind ([`GpuError::Capacity`]; lavapipe binds 128 MiB), the cameras are rendered in chunks of
-//! at most [`ResidentStep::max_cameras_per_call`] (halved until a call fits, then kept). The
-//! forward renders the chunks last to first into one image batch; the backward runs them first
-//! to last, re-rendering every chunk but the first (whose forward state the renderer still
-//! holds), with the per-Gaussian sums carried between chunks in camera order ([`CameraChunk`]):
-//! the result is bit-identical to one call over all cameras, at the cost of one extra forward
-//! per extra chunk.
+//! at most [`ResidentStep::max_cameras_per_call`] (shrunk in proportion to the overflow until a
+//! call fits, then kept). The forward renders the chunks last to first into one image batch;
+//! the backward runs them first to last, re-rendering every chunk but the first (whose forward
+//! state the renderer still holds), with the per-Gaussian sums carried between chunks in camera
+//! order ([`CameraChunk`]): the result is bit-identical to one call over all cameras, at the
+//! cost of one extra forward per extra chunk. The Gaussians themselves are not split: one call
+//! needs about 250 bytes per Gaussian in a single binding (about 530k Gaussians on lavapipe).
+//!
+//! Memory: each training image is uploaded at its view's first step and stays resident
+//! (H·W·12 bytes: 1.3 MB at 400×270, 32 MB for 25 views); [`ResidentStep::allocated_bytes`]
+//! and [`GpuRenderer::allocated_bytes`] report what the step and the renderer hold.
 
 use gems_splat::{Camera, Gaussians, RenderSettings};
 
@@ -255,12 +260,20 @@ impl ResidentStep {
     ) -> Result<wgpu::Buffer, GpuError> {
         let nc = cams.len();
         loop {
+            let chunk = self.max_cameras.min(nc);
             match self.forward_all(r, cams, bgs, s) {
-                Err(GpuError::Capacity(why)) if self.max_cameras.min(nc) > 1 => {
-                    self.max_cameras = self.max_cameras.min(nc).div_ceil(2);
+                Err(GpuError::Capacity {
+                    what,
+                    needed,
+                    limit,
+                }) if chunk > 1 => {
+                    // Every size that can overflow grows about linearly with the cameras per
+                    // call: scale the chunk by limit/needed, and shrink it by at least one.
+                    let scaled = (chunk as u128 * limit as u128 / needed.max(1) as u128) as usize;
+                    self.max_cameras = scaled.clamp(1, chunk - 1);
                     tracing::debug!(
                         cameras = self.max_cameras,
-                        "renderer call too large ({why}); splitting the cameras"
+                        "{what} needs {needed}, the adapter allows {limit}: fewer cameras per call"
                     );
                 }
                 other => return other,
@@ -442,6 +455,21 @@ impl ResidentStep {
     /// Bytes of GPU memory held by the training images uploaded so far.
     pub fn image_bytes(&self) -> u64 {
         self.targets.iter().flatten().map(|b| b.size()).sum()
+    }
+
+    /// Bytes of GPU memory this state holds: the Gaussians with their moments and gradients,
+    /// the images, the losses' and the chunks' buffers (the renderer's own are
+    /// [`GpuRenderer::allocated_bytes`]).
+    pub fn allocated_bytes(&self) -> u64 {
+        let per_row: u64 = Group::ALL.iter().map(|g| g.width() as u64 * 4).sum();
+        let params = self.gaussians.capacity() as u64 * per_row * 3;
+        let grads = self.grads.capacity() as u64 * per_row;
+        let extra: u64 = [&self.renders, &self.d_chunk, &self.pose]
+            .iter()
+            .filter_map(|b| b.as_ref().map(|b| b.size()))
+            .sum();
+        let losses: u64 = self.losses.iter().map(|(_, l)| l.allocated_bytes()).sum();
+        params + grads + self.image_bytes() + extra + losses
     }
 
     /// Records and submits one SGLD noise step (Philox noise keyed by `p.seed`, `p.step`).
