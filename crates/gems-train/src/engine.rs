@@ -2,9 +2,12 @@
 //! one (`gems_gpu::GpuRenderer`), chosen with `--device`.
 //!
 //! Both implement the same contract and are tested against each other (gems-gpu's parity
-//! tests), so a run may switch engines between a checkpoint and its `--resume`. Results of the
+//! tests), so a run may switch engines between a checkpoint and its `--resume`. Renders of the
 //! two engines differ by float rounding only; each engine alone is deterministic (the GPU one
-//! on a given adapter and driver: it adds no floats atomically).
+//! on a given adapter and driver: it adds no floats atomically). With the GPU engine the
+//! trainer keeps the training step resident on the GPU (`gems_gpu::ResidentStep`, see
+//! [`crate::trainer`]); the [`crate::blur::Rasterizer`] calls here serve evaluation and the
+//! CPU engine's step.
 
 use gems_gpu::{DeviceChoice, GpuRenderer};
 use gems_splat::{Camera, Gaussians, Gradients, RenderOutput, RenderSettings, Renderer};

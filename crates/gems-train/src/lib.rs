@@ -9,7 +9,9 @@
 //! * [`blur`] — the blur model: n virtual cameras in one render call, mean, and the gradient
 //!   chain to Gaussians and trajectory knots.
 //! * [`engine`] — [`engine::Engine`]: the CPU or GPU splatting engine (`--device`).
-//! * [`trainer`] — [`trainer::Trainer`]: the joint optimisation loop and its checkpointable state.
+//! * [`trainer`] — [`trainer::Trainer`]: the joint optimisation loop and its checkpointable state
+//!   (on the GPU engine the Gaussians stay resident on the GPU; `Trainer::sync` downloads them,
+//!   and `Trainer::run` syncs at checkpoint steps and at the end).
 //! * [`io`] — atomic files, checkpoints (safetensors + JSON) and [`io::TrainOutput`], the
 //!   trained result that gems-eval consumes.
 //! * [`prepare`] — scene folder + init mode (colmap / gt / gt-noisy) → [`trainer::TrainInput`].
@@ -25,7 +27,8 @@
 //! let ply_gaussians = output.normalization.gaussians_to_input_frame(&output.gaussians);
 //! ```
 //! Resume: `io::load_checkpoint(dir)` → `Trainer::from_state(cfg, views, …, state)` continues
-//! bit-identically (same seed → same result; results do not depend on the thread count).
+//! bit-identically (same seed → same result; results do not depend on the thread count; on the
+//! GPU engine, on the same adapter and driver).
 pub mod adam;
 pub mod blur;
 pub mod config;
