@@ -138,11 +138,6 @@ impl ResidentStep {
         self.gaussians.is_empty()
     }
 
-    /// The resident Gaussians.
-    pub fn gaussians(&self) -> &GpuGaussians {
-        &self.gaussians
-    }
-
     /// Sets the active SH degree (the trainer's schedule).
     pub fn set_sh_degree(&mut self, degree: u32) {
         self.gaussians.sh_degree = degree;
