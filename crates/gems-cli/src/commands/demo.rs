@@ -6,8 +6,7 @@
 //!    camera's, as EXIF would give it for a real photo, unless `--estimate-focal`) — with
 //!    `--events`, on the images the scene's events deblur by EDI (GeMS-E) — falling back to noisy
 //!    ground-truth poses, labelled as such, only if SfM fails outright;
-//! 3. GeMS training (blur model, Bézier trajectories, MCMC) with a short schedule (trajectory
-//!    gradients accumulated over proportionally fewer steps, so the knots get as many updates);
+//! 3. GeMS training (blur model, Bézier trajectories, MCMC) with a short schedule;
 //! 4. evaluation and `report.html`.
 
 use std::path::PathBuf;
@@ -130,10 +129,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..TrainConfig::default()
     };
     cfg.mcmc.cap_max = args.cap_max;
-    // The paper accumulates trajectory gradients over 25 steps: 280 knot updates in its 7000
-    // steps. A short run keeps that number of updates by accumulating over proportionally fewer
-    // steps (3 for the default 1000).
-    cfg.pose.accumulate_steps = (25 * cfg.steps / 7000).max(1);
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("invalid demo configuration: {e}"))?;
     tracing::info!(steps = cfg.steps, init = %mode.label(), "3/3 training and evaluation");
