@@ -17,12 +17,10 @@ use std::time::Instant;
 
 use anyhow::Context;
 use gems_eval::MetricsReport;
+use gems_pipeline::{InitMode, TrainJob, train_and_report};
 use gems_synth::SynthConfig;
 use gems_train::TrainConfig;
-use gems_train::prepare::InitMode;
 use serde::Serialize;
-
-use super::pipeline::{TrainJob, train_and_report};
 
 /// Arguments of `gems bench-quality`.
 #[derive(clap::Args)]
@@ -126,7 +124,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         let focal = Some(summary.intrinsics.fx);
         let sfm_row = |name: &'static str, scene: &Path, out: &Path, cfg: &TrainConfig| {
-            match super::train::run_sfm(scene, &out.join("sfm"), seed, focal) {
+            match gems_pipeline::run_sfm(scene, &out.join("sfm"), seed, focal) {
                 Ok(model) => train_row(
                     seed,
                     name,
@@ -203,7 +201,8 @@ fn train_row(
         resume: false,
         evaluate: true,
         lpips: &[],
-        device,
+        engine: super::open_engine(device)?,
+        progress: true,
     })?;
     let seconds = start.elapsed().as_secs_f64();
     Ok(Row::from_metrics(seed, name, &read_metrics(out)?, seconds))

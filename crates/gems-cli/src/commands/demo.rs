@@ -12,11 +12,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use gems_pipeline::{InitMode, TrainJob, train_and_report};
 use gems_synth::SynthConfig;
 use gems_train::TrainConfig;
-use gems_train::prepare::InitMode;
-
-use super::pipeline::{TrainJob, train_and_report};
 
 /// Arguments of `gems demo`.
 #[derive(clap::Args)]
@@ -101,18 +99,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             tracing::info!("2/3 EDI deblurring with the events, then structure from motion");
             let threshold = synth.events.as_ref().map_or(0.2, |e| e.threshold_pos);
             // gems synth blurs by averaging sRGB-encoded frames; its events see linear light.
-            super::train::edi_images(
+            gems_pipeline::edi_images(
                 &scene,
                 &out.join("train"),
-                threshold,
-                gems_init::edi::Linearisation::SrgbEncodedAverage,
-                None,
+                &gems_pipeline::EventInit {
+                    threshold,
+                    linearisation: gems_init::edi::Linearisation::SrgbEncodedAverage,
+                    time_unit: None,
+                },
             )?
         } else {
             tracing::info!("2/3 structure from motion on the blurry images");
             scene.clone()
         };
-        match super::train::run_sfm(&sfm_images, &out.join("sfm"), args.seed, focal) {
+        match gems_pipeline::run_sfm(&sfm_images, &out.join("sfm"), args.seed, focal) {
             Ok(model) => InitMode::Colmap(Some(model)),
             Err(e) => {
                 tracing::warn!(
@@ -132,7 +132,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("invalid demo configuration: {e}"))?;
     tracing::info!(steps = cfg.steps, init = %mode.label(), "3/3 training and evaluation");
-    let report = train_and_report(TrainJob {
+    let run = train_and_report(TrainJob {
         scene: &scene,
         output: &out.join("train"),
         mode,
@@ -141,10 +141,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         resume: false,
         evaluate: true,
         lpips: &[],
-        device: args.device,
-    })?
-    .context("evaluation produced no report")?;
-    // The run itself printed every split's figures (pipeline::train_and_report).
+        engine: super::open_engine(args.device)?,
+        progress: true,
+    })?;
+    let (Some(report), Some(metrics)) = (run.report, run.metrics) else {
+        anyhow::bail!("evaluation produced no report");
+    };
+    super::print_splits(&metrics);
     println!("report: {}", report.display());
     Ok(())
 }

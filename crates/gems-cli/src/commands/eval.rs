@@ -64,7 +64,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let scene = gems_eval::open_scene_for(&output, &args.scene, &opts)?;
     let mut data = gems_eval::eval_data_from_scene(&output, &scene)?;
-    super::pipeline::attach_edi(&mut data, &output, &args.output)?;
+    gems_pipeline::attach_edi(&mut data, &output, &args.output)?;
     let lpips = if args.lpips.is_empty() {
         tracing::warn!("no --lpips weights given: LPIPS will be reported as absent");
         None
@@ -85,7 +85,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.set_style(indicatif::ProgressStyle::with_template(
         "eval [{bar:30}] {pos}/{len} views  {msg}  ({elapsed}, ETA {eta})",
     )?);
-    let mut engine = super::pipeline::open_engine(args.device)?;
+    let mut engine = super::open_engine(args.device)?;
     let eval = gems_eval::evaluate_output_on(
         &mut engine,
         &output,

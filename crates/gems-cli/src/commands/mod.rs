@@ -1,4 +1,6 @@
-//! One module per subcommand; each exposes `Args` (clap) and `run`.
+//! One module per subcommand; each exposes `Args` (clap) and `run`. A command parses its
+//! arguments, calls the libraries (a whole run: gems-pipeline), and prints. The two helpers here
+//! are what several commands print the same way.
 pub mod bench_quality;
 pub mod demo;
 pub mod edi;
@@ -6,8 +8,34 @@ pub mod eval;
 pub mod events;
 pub mod export;
 pub mod info;
-pub mod pipeline;
 pub mod render;
 pub mod sfm;
 pub mod synth;
 pub mod train;
+
+use anyhow::Context;
+use gems_gpu::DeviceChoice;
+use gems_train::engine::Engine;
+
+/// The splatting engine for `--device`, announced on stdout; `--device gpu` without an
+/// adapter is an error.
+pub fn open_engine(device: DeviceChoice) -> anyhow::Result<Engine> {
+    let engine = Engine::select(device).context("--device")?;
+    println!("device: {}", engine.describe());
+    Ok(engine)
+}
+
+/// One line per split a run evaluated: PSNR and SSIM.
+pub fn print_splits(m: &gems_eval::MetricsReport) {
+    for (label, split) in [
+        ("blurry input", &m.input),
+        ("deblur (trajectory midpoint)", &m.deblur),
+        ("deblur (pose refined, GeMS protocol)", &m.deblur_refined),
+        ("novel views (pose refined)", &m.nvs),
+        ("novel views (initial pose)", &m.nvs_no_pose_opt),
+    ] {
+        if let Some(s) = split {
+            println!("{label}: PSNR {:.2} dB, SSIM {:.4}", s.psnr, s.ssim);
+        }
+    }
+}

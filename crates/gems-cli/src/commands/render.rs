@@ -210,7 +210,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         antialiased: args.antialiased,
         ..Default::default()
     };
-    let mut renderer = super::pipeline::open_engine(args.device)?;
+    let mut renderer = super::open_engine(args.device)?;
     let out = renderer.forward(&g, &[cam], &[args.background], &settings)?;
     write_png(&args.output, &out, 0)?;
     let covered = out.alpha.iter().filter(|&&a| a > 0.5).count();

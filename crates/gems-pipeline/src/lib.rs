@@ -1,0 +1,28 @@
+//! A whole gems run put together, for the `gems` command line and for library users alike.
+//!
+//! The flow, one step per function:
+//! 1. **initialisation** ([`resolve_init`]): where poses and points come from — the built-in
+//!    blur-robust SfM on the blurry images ([`run_sfm`]), a COLMAP model the scene carries or a
+//!    user gives, a user-installed COLMAP run as a subprocess ([`run_colmap`]), the scene's events
+//!    deblurring the images by EDI for either initialiser ([`edi_images`], GeMS-E), or ground
+//!    truth (optionally perturbed);
+//! 2. **training** (gems-train), with periodic atomic checkpoints and resume;
+//! 3. **exports**: `point_cloud.ply` (input frame), `model.json`, `config.toml`;
+//! 4. **evaluation and report** (gems-eval): `metrics.json`, trajectories, renders,
+//!    `report.html`.
+//!
+//! [`train_scene`] runs all four from a [`TrainRequest`]; [`train_and_report`] runs 2–4 from an
+//! already resolved [`InitMode`].
+//!
+//! Logs go through `tracing`. Progress bars (indicatif, on stderr) are drawn only when the
+//! request asks for them (`progress: true`, what the command line does); a library user leaves
+//! them off and reads the step reports from the logs.
+
+mod error;
+mod init;
+mod run;
+
+pub use error::PipelineError;
+pub use gems_train::prepare::InitMode;
+pub use init::{EventInit, Init, InitRequest, edi_images, resolve_init, run_colmap, run_sfm};
+pub use run::{RunOutcome, TrainJob, TrainRequest, attach_edi, train_and_report, train_scene};
