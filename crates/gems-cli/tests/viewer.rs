@@ -60,7 +60,7 @@ fn trained_scene_viewer_and_exports() {
     let mut renderer = Renderer::new();
     let mut shots = Vec::new();
     for v in trained.views.iter().take(2) {
-        let mut cam = gems_train::blur::camera_from_c2w(&(&v.mid_c2w).into(), &v.intrinsics);
+        let mut cam = gems_splat::Camera::from_c2w(&v.intrinsics, &(&v.mid_c2w).into());
         let k = 500u32.div_ceil(cam.width).max(1);
         for f in [&mut cam.fx, &mut cam.fy, &mut cam.cx, &mut cam.cy] {
             *f *= k as f32;

@@ -6,7 +6,8 @@ use std::sync::LazyLock;
 use gems_data::colmap::{self, Image, Point2D, Point3D};
 use gems_data::image::downscale_area;
 use gems_data::llff::{self, LlffRow};
-use gems_data::{ImageRgb, OpenOptions, Pose};
+use gems_data::{ImageRgb, OpenOptions};
+use gems_math::Pose;
 
 fn main() {
     divan::main();

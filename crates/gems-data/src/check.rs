@@ -14,8 +14,8 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 
 use crate::image::{image_dimensions, load_image};
-use crate::pose::Pose;
 use crate::scene::{Scene, View};
+use gems_math::Pose;
 
 /// One thing wrong with a scene.
 #[derive(Debug, Clone, PartialEq)]

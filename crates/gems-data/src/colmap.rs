@@ -13,7 +13,7 @@ use std::path::Path;
 
 use crate::error::{DataError, FormatError, Result};
 use crate::fsutil::{read_bytes, read_text, write_atomic};
-use crate::pose::{Intrinsics, Pose};
+use gems_math::{Intrinsics, Pose};
 
 /// COLMAP camera models (ids 0–10 of COLMAP's model registry).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

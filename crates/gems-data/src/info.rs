@@ -9,8 +9,8 @@ use serde::Serialize;
 use crate::error::{DataError, Result};
 use crate::events::PT_TO_NPY_HINT;
 use crate::manifest::Manifest;
-use crate::pose::Intrinsics;
 use crate::scene::{Layout, PoseSource, Scene, Split};
+use gems_math::Intrinsics;
 
 /// Summary of a scene. JSON keys `layout`, `views`, `train`, `eval_deblur`, `eval_nvs`, `width`,
 /// `height`, `has_gt_poses`, `has_sfm`, `events` are stable.

@@ -36,7 +36,6 @@ pub mod llff;
 pub mod manifest;
 pub mod nerfstudio;
 mod npy;
-pub mod pose;
 pub mod scene;
 pub mod undistort;
 
@@ -45,7 +44,6 @@ pub use fsutil::write_atomic;
 pub use image::{ImageCache, ImageRgb, load_image, save_png};
 pub use info::{SceneInfo, scene_info};
 pub use manifest::{Manifest, ManifestPoses, write_hold_marker, write_manifest};
-pub use pose::{Intrinsics, Pose};
 pub use scene::{
     FileUse, Layout, OpenOptions, PoseSource, Scene, Split, View, cache_folder, open_scene,
     open_scene_undistorted,

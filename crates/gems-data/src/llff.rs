@@ -13,7 +13,7 @@ use std::path::Path;
 use crate::error::{DataError, FormatError, Result};
 use crate::fsutil::{read_bytes, write_atomic};
 use crate::npy;
-use crate::pose::{Intrinsics, Pose};
+use gems_math::{Intrinsics, Pose};
 
 /// Tolerance on `|RᵀR − I|` for a row's rotation to count as a rotation. LLFF files are written
 /// in float64 from orthonormal matrices, so anything larger means corrupt or mis-ordered data.
@@ -134,7 +134,7 @@ impl LlffRow {
         ];
         // [down, right, back] = [y, x, −z] of a right-handed frame: one swap and one negation,
         // so a valid row still has det = +1 and the plain rotation check applies.
-        let err = crate::pose::rotation_error(&r);
+        let err = gems_math::rotation_error(&r);
         if err.is_nan() || err > ROTATION_TOLERANCE {
             return Err(FormatError::new(format!(
                 "{what} does not hold a rotation (orthonormality/determinant error {err:.3e})"

@@ -15,7 +15,7 @@ use serde_json::{Map, Value, json};
 
 use crate::error::{DataError, FormatError, Result};
 use crate::fsutil::{read_text, write_atomic};
-use crate::pose::{Intrinsics, Pose};
+use gems_math::{Intrinsics, Pose};
 
 /// How a frame's intrinsics are given.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -216,7 +216,7 @@ fn matrix_of(rows: &[Value], what: &str) -> std::result::Result<[[f64; 4]; 4], F
         [m[1][0], m[1][1], m[1][2]],
         [m[2][0], m[2][1], m[2][2]],
     ];
-    let err = crate::pose::rotation_error(&rot);
+    let err = gems_math::rotation_error(&rot);
     if !m.iter().flatten().all(|v| v.is_finite()) || err.is_nan() || err > 1e-3 {
         return Err(FormatError::new(format!(
             "{what}: transform_matrix is not a finite rigid transform (rotation error {err:.2e})"

@@ -78,7 +78,7 @@ use crate::image::{
 use crate::llff::{self, LlffRow};
 use crate::manifest::{Manifest, ManifestPoses, read_hold_marker, read_manifest};
 use crate::nerfstudio::{self, FrameSplit};
-use crate::pose::{Intrinsics, Pose};
+use gems_math::{Intrinsics, Pose};
 
 /// Default hold-out interval (BAD-Gaussians / PRISM3D / LLFF).
 pub const DEFAULT_HOLD: i64 = 8;

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::colmap::{Camera, CameraModel};
 use crate::image::ImageRgb;
-use crate::pose::Intrinsics;
+use gems_math::Intrinsics;
 
 /// Applies the model's distortion to a normalised image point `(x, y)` (`z = 1`).
 ///

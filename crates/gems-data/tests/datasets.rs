@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use gems_data::colmap::{self, Camera, CameraModel, Image, ModelFormat, SparseModel};
 use gems_data::llff::{self, LlffRow};
 use gems_data::*;
+use gems_math::Pose;
 
 fn write_img(path: &Path, w: u32, h: u32, seed: u32) {
     let mut img = ImageRgb::new(w, h);

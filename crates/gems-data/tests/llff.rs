@@ -1,7 +1,7 @@
 //! LLFF `poses_bounds.npy` / ExBluRF sub-frame tests.
 
-use gems_data::Pose;
 use gems_data::llff::*;
+use gems_math::Pose;
 use proptest::prelude::*;
 
 fn rot_pose(angle: f64, t: [f64; 3]) -> Pose {

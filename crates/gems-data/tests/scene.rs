@@ -7,6 +7,7 @@ use gems_data::colmap::{self, Camera, CameraModel, Image, ModelFormat, SparseMod
 use gems_data::llff::{self, LlffRow};
 use gems_data::nerfstudio::{self, CameraSpec, Frame, FrameSplit, Transforms};
 use gems_data::*;
+use gems_math::{Intrinsics, Pose};
 
 fn write_img(path: &Path, w: u32, h: u32, seed: u32) {
     let mut img = ImageRgb::new(w, h);

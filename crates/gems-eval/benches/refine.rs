@@ -25,11 +25,7 @@ fn refine_100_steps_128x96_2k_gaussians(bencher: divan::Bencher) {
     });
 }
 
-fn gems_eval_bench_scene() -> (
-    gems_splat::Gaussians,
-    gems_train::blur::Intrinsics,
-    gems_math::Se3,
-) {
+fn gems_eval_bench_scene() -> (gems_splat::Gaussians, gems_math::Intrinsics, gems_math::Se3) {
     let mut g = gems_splat::Gaussians::with_degree(0);
     for i in 0..2000u32 {
         let f = |s: u32| {
@@ -49,7 +45,7 @@ fn gems_eval_bench_scene() -> (
             sh,
         );
     }
-    let k = gems_train::blur::Intrinsics {
+    let k = gems_math::Intrinsics {
         fx: 110.0,
         fy: 110.0,
         cx: 64.0,

@@ -34,12 +34,14 @@ fn main() {
         g.push(mean, quat, ls, (rnd() - 0.3) * 6.0, sh);
     }
     let cam = Camera::look_at(
-        700.0,
-        700.0,
-        400.0,
-        300.0,
-        800,
-        600,
+        &gems_math::Intrinsics {
+            fx: 700.0,
+            fy: 700.0,
+            cx: 400.0,
+            cy: 300.0,
+            width: 800,
+            height: 600,
+        },
         [0.0; 3],
         [0.0, 0.0, 6.0],
         [0.0, -1.0, 0.0],

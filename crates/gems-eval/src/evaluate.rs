@@ -1,9 +1,8 @@
 //! Per-image metrics, split summaries, APE and the metrics.json document.
 
-use gems_math::{Alignment, Se3, ape_translation};
+use gems_math::{Alignment, Intrinsics, Se3, ape_translation};
 use gems_metrics::Lpips;
-use gems_splat::{Gaussians, RenderSettings};
-use gems_train::blur::{Intrinsics, camera_from_c2w};
+use gems_splat::{Camera, Gaussians, RenderSettings};
 use gems_train::engine::Engine;
 use serde::{Deserialize, Serialize};
 
@@ -195,7 +194,7 @@ pub fn evaluate_views_with_progress(
                 r.c2w
             }
         };
-        let cam = camera_from_c2w(&pose, k);
+        let cam = Camera::from_c2w(k, &pose);
         let rgb = renderer
             .forward(gaussians, &[cam], &[[0.0; 3]], &RenderSettings::default())?
             .rgb;

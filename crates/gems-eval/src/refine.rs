@@ -9,9 +9,8 @@
 //! one after the last update (PRISM3D logs its metrics at step 80 of 100, an artefact of its
 //! logging interval that we do not copy).
 
-use gems_math::{Se3, Vector6, c2w_right_perturbation_gradient, se3_right_jacobian};
-use gems_splat::{Gaussians, RenderSettings};
-use gems_train::blur::{Intrinsics, camera_from_c2w};
+use gems_math::{Intrinsics, Se3, Vector6, c2w_right_perturbation_gradient, se3_right_jacobian};
+use gems_splat::{Camera, Gaussians, RenderSettings};
 use gems_train::engine::Engine;
 
 use crate::EvalError;
@@ -89,7 +88,7 @@ pub fn pose_loss_and_grad(
     }
     let xi = Vector6::from(*delta);
     let c2w = *c2w_init * Se3::exp(&xi);
-    let cam = camera_from_c2w(&c2w, k);
+    let cam = Camera::from_c2w(k, &c2w);
     let bg = [[0.0f32; 3]];
     let out = renderer.forward(gaussians, &[cam], &bg, &RenderSettings::default())?;
     let mut d_rgb = vec![0.0f32; n];
@@ -150,7 +149,7 @@ pub fn render(
     c2w: &Se3,
     k: &Intrinsics,
 ) -> Result<Vec<f32>, EvalError> {
-    let cam = camera_from_c2w(c2w, k);
+    let cam = Camera::from_c2w(k, c2w);
     Ok(renderer
         .forward(gaussians, &[cam], &[[0.0; 3]], &RenderSettings::default())?
         .rgb)

@@ -4,9 +4,9 @@
 use std::path::Path;
 
 use gems_data::{OpenOptions, Scene, Split, load_image, open_scene};
-use gems_math::Se3;
+use gems_math::{Intrinsics, Se3};
 use gems_metrics::Lpips;
-use gems_train::blur::Intrinsics;
+use gems_splat::Camera;
 use gems_train::engine::Engine;
 use gems_train::io::TrainOutput;
 
@@ -56,7 +56,7 @@ pub struct Evaluation {
     pub nvs_no_pose_opt: SplitResult,
 }
 
-fn se3(p: &gems_train::io::Pose) -> Se3 {
+fn se3(p: &gems_math::Pose) -> Se3 {
     Se3::from(p)
 }
 
@@ -334,30 +334,9 @@ pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalD
         // Without an SfM model the scene knows no intrinsics; the datasets use one camera, so
         // take the trained views' camera at this image size.
         let k = match model_k.or(s.intrinsics) {
-            Some(k) => Intrinsics {
-                fx: k.fx as f32,
-                fy: k.fy as f32,
-                cx: k.cx as f32,
-                cy: k.cy as f32,
-                width: k.width,
-                height: k.height,
-            },
+            Some(k) => k,
             None => match output.views.first() {
-                Some(v) => {
-                    let (sx, sy) = (
-                        s.width as f32 / v.intrinsics.width as f32,
-                        s.height as f32 / v.intrinsics.height as f32,
-                    );
-                    let t = v.intrinsics;
-                    Intrinsics {
-                        fx: t.fx * sx,
-                        fy: t.fy * sy,
-                        cx: t.cx * sx,
-                        cy: t.cy * sy,
-                        width: s.width,
-                        height: s.height,
-                    }
-                }
+                Some(v) => v.intrinsics.resized(s.width, s.height),
                 None => continue,
             },
         };
@@ -418,7 +397,7 @@ pub fn report_input(
     max_rows: usize,
 ) -> ReportInput {
     let norm = &output.normalization;
-    let centre = |p: &gems_train::io::Pose| -> [f64; 3] { norm.invert_point(&se3(p).trans).into() };
+    let centre = |p: &gems_math::Pose| -> [f64; 3] { norm.invert_point(&se3(p).trans).into() };
     let grid = eval
         .deblur_views
         .iter()
@@ -506,7 +485,7 @@ pub fn viewer_scene(output: &TrainOutput, data: &EvalData) -> ViewerScene {
         cameras.push(ViewerCamera {
             name: v.name.clone(),
             kind: CameraKind::Train,
-            camera: gems_train::blur::camera_from_c2w(&se3(&v.mid_c2w), k),
+            camera: Camera::from_c2w(k, &se3(&v.mid_c2w)),
             trajectory: v
                 .virtual_c2w
                 .iter()
@@ -521,7 +500,7 @@ pub fn viewer_scene(output: &TrainOutput, data: &EvalData) -> ViewerScene {
         cameras.push(ViewerCamera {
             name: h.name.clone(),
             kind: CameraKind::HeldOut,
-            camera: gems_train::blur::camera_from_c2w(&h.c2w_init, &h.intrinsics),
+            camera: Camera::from_c2w(&h.intrinsics, &h.c2w_init),
             trajectory: Vec::new(),
             images: images.into_iter().collect(),
         });
@@ -623,7 +602,7 @@ pub fn write_renders_on(
             .virtual_c2w
             .iter()
             .chain(std::iter::once(&v.mid_c2w))
-            .map(|p| gems_train::blur::camera_from_c2w(&Se3::from(p), k))
+            .map(|p| Camera::from_c2w(k, &Se3::from(p)))
             .collect();
         let n = v.virtual_c2w.len();
         let out = engine.forward(

@@ -5,8 +5,9 @@ mod common;
 
 use gems_eval::tum::read_tum;
 use gems_eval::*;
+use gems_math::Pose;
 use gems_math::Se3;
-use gems_train::io::{Pose, TrainOutput, ViewResult};
+use gems_train::io::{TrainOutput, ViewResult};
 use gems_train::normalize::Normalization;
 
 fn output(mid_noise: f64) -> (TrainOutput, EvalData) {

@@ -5,8 +5,9 @@ mod common;
 
 use gems_data::Split;
 use gems_eval::*;
+use gems_math::Pose;
 use gems_math::Se3;
-use gems_train::io::{Pose, TrainOutput, ViewResult};
+use gems_train::io::{TrainOutput, ViewResult};
 use gems_train::normalize::Normalization;
 
 fn trained_on(scene: &gems_data::Scene, factor: u32, cfg_fov: f64) -> TrainOutput {
@@ -19,7 +20,7 @@ fn trained_on(scene: &gems_data::Scene, factor: u32, cfg_fov: f64) -> TrainOutpu
             let (w, h) = (v.width / factor, v.height / factor);
             let f = 0.5 * w as f64 / (0.5 * cfg_fov.to_radians()).tan();
             let k = v.intrinsics.map_or(
-                gems_data::Intrinsics {
+                gems_math::Intrinsics {
                     fx: f,
                     fy: f,
                     cx: w as f64 / 2.0,
@@ -32,14 +33,7 @@ fn trained_on(scene: &gems_data::Scene, factor: u32, cfg_fov: f64) -> TrainOutpu
             let c2w = Se3::from(v.pose.or(v.gt_pose).unwrap()).inverse();
             ViewResult {
                 name: v.name.clone(),
-                intrinsics: gems_train::blur::Intrinsics {
-                    fx: k.fx as f32,
-                    fy: k.fy as f32,
-                    cx: k.cx as f32,
-                    cy: k.cy as f32,
-                    width: k.width,
-                    height: k.height,
-                },
+                intrinsics: k,
                 c2w_init: Pose::from(&c2w),
                 c2w_gt: v.gt_pose.map(|p| Pose::from(&Se3::from(p).inverse())),
                 c2w_gt_subframes: Vec::new(),

@@ -72,12 +72,14 @@ fn scene() -> Gaussians {
 /// 640×480: headless Chromium does not make windows narrower than 500 pixels.
 fn camera(pos: [f32; 3], target: [f32; 3]) -> Camera {
     Camera::look_at(
-        680.0,
-        660.0,
-        324.0,
-        234.0,
-        640,
-        480,
+        &gems_math::Intrinsics {
+            fx: 680.0,
+            fy: 660.0,
+            cx: 324.0,
+            cy: 234.0,
+            width: 640,
+            height: 480,
+        },
         pos,
         target,
         [0.0, -1.0, 0.0],

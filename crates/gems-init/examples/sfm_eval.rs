@@ -86,7 +86,7 @@ fn main() {
             return;
         }
     };
-    let gt: Vec<gems_data::pose::Pose> = rows.iter().map(|r| r.pose()).collect();
+    let gt: Vec<gems_math::Pose> = rows.iter().map(|r| r.pose()).collect();
     let m = |r: &[[f64; 3]; 3]| nalgebra::Matrix3::from_fn(|i, j| r[i][j]);
     let (mut est, mut g, mut rots) = (Vec::new(), Vec::new(), Vec::new());
     for (v, gp) in r.views.iter().zip(&gt) {

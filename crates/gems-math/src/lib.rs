@@ -3,6 +3,8 @@
 //! Conventions: the camera frame is OpenCV (x right, y down, z forward). Tangent vectors of se(3)
 //! are ordered translation first, then rotation: ξ = [ρ; φ]. Quaternions are (w, x, y, z).
 //!
+//! - [`Pose`], [`Intrinsics`] ([`camera`]): the one camera vocabulary of gems — a rigid transform
+//!   in plain arrays (what files store; scenes hold world-to-camera) and f64 pinhole intrinsics.
 //! - [`So3`], [`Se3`]: compose (`*`), inverse, act on points, `exp`/`log`, adjoint; left/right
 //!   Jacobians and their inverses ([`so3_left_jacobian`], [`se3_right_jacobian`], …), with Taylor
 //!   branches near zero. Left: Exp(ξ+dξ) ≈ Exp(𝒥_l dξ)·Exp(ξ); right: Exp(ξ+dξ) ≈ Exp(ξ)·Exp(𝒥_r dξ).
@@ -18,6 +20,7 @@
 //! - [`align`]: Umeyama Sim(3)/SE(3) alignment and evo's APE translation statistics.
 
 pub mod align;
+pub mod camera;
 pub mod convert;
 pub mod posegrad;
 pub mod se3;
@@ -25,6 +28,7 @@ pub mod so3;
 pub mod trajectory;
 
 pub use align::{Alignment, ApeStats, Sim3, ape_translation, error_stats, umeyama};
+pub use camera::{Intrinsics, Pose, rotation_error};
 pub use convert::{
     axis_angle_to_rotation, c2w_to_w2c, camera_center_from_w2c, look_at_c2w, quat_wxyz_to_rotation,
     rotation_to_axis_angle, rotation_to_quat_wxyz, w2c_to_c2w,
@@ -39,7 +43,9 @@ pub use so3::{
     So3, hat, so3_left_jacobian, so3_left_jacobian_inv, so3_right_jacobian, so3_right_jacobian_inv,
     vee,
 };
-pub use trajectory::{Jacobian6, Trajectory, TrajectoryKind, bernstein, uneven_speed_energy};
+pub use trajectory::{
+    BEZIER_DEFAULT_KNOTS, Jacobian6, Trajectory, TrajectoryKind, bernstein, uneven_speed_energy,
+};
 
 /// Errors of the maths layer (bad sizes or degenerate geometry; never a panic on user data).
 #[derive(Debug, thiserror::Error)]

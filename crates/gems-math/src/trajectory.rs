@@ -12,8 +12,10 @@ use crate::MathError;
 use crate::se3::{Se3, se3_right_jacobian, se3_right_jacobian_inv};
 use crate::so3::{So3, so3_left_jacobian_inv, so3_right_jacobian, so3_right_jacobian_inv};
 
-/// Which curve family a trajectory uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// Which curve family a trajectory uses (the paper's ablation). In configuration files:
+/// `bezier`, `linear` or `spline`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum TrajectoryKind {
     /// GeMS Eq. (8): Δ(u) = Π_{j=0..M} Exp(b_j(u) ξ_j), Bernstein b_j of degree M, product in
     /// order j = 0..M (BAD-Gaussians / PRISM3D "right product").
@@ -23,6 +25,7 @@ pub enum TrajectoryKind {
     Linear,
     /// Four knots T_k = Exp(ξ_k); uniform cumulative cubic B-spline of BAD-Gaussians: translation
     /// with the plain B-spline basis, rotation R₀ Π_k Exp(B̃_k(u) Log(R_{k−1}ᵀR_k)).
+    #[serde(rename = "spline")]
     CubicBSpline,
 }
 
@@ -36,11 +39,21 @@ impl TrajectoryKind {
         }
     }
 
-    /// Default knot count: 9 for Bézier (the paper's 9 control points), else the required one.
+    /// Default knot count: [`BEZIER_DEFAULT_KNOTS`] for Bézier, else the required one.
     pub fn default_knots(self) -> usize {
-        self.required_knots().unwrap_or(9)
+        self.knots(BEZIER_DEFAULT_KNOTS)
+    }
+
+    /// The knot count of this kind when a Bézier curve has `bezier_knots` control knots: the one
+    /// place that says how many knots each kind has.
+    pub fn knots(self, bezier_knots: usize) -> usize {
+        self.required_knots().unwrap_or(bezier_knots)
     }
 }
+
+/// The Bézier control-point count of the GeMS paper ("For Bézier, we use 9 control points",
+/// implementation details), i.e. degree 8.
+pub const BEZIER_DEFAULT_KNOTS: usize = 9;
 
 /// A camera trajectory over the exposure, parameterised by se(3) knots ([ρ; φ] each).
 #[derive(Clone, Debug, PartialEq)]

@@ -3,6 +3,7 @@
 //! Gaussians, and a single 800×540 view. Gaussian sizes scale with N so that about 30
 //! Gaussians overlap the average pixel (where α ≥ 1/255), as in a trained scene.
 
+use gems_math::Intrinsics;
 use gems_splat::{Camera, Gaussians, RenderSettings, Renderer, SH_COEFFS};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -54,12 +55,14 @@ fn scene(n: usize, nc: usize, w: u32, h: u32) -> Scene {
         .map(|c| {
             let s = c as f32 / nc.max(2) as f32 - 0.5;
             Camera::look_at(
-                f,
-                f,
-                0.5 * w as f32,
-                0.5 * h as f32,
-                w,
-                h,
+                &Intrinsics {
+                    fx: f64::from(f),
+                    fy: f64::from(f),
+                    cx: 0.5 * f64::from(w),
+                    cy: 0.5 * f64::from(h),
+                    width: w,
+                    height: h,
+                },
                 [0.3 * s, 0.05 * s, -dist],
                 [0.1 * s, 0.0, 0.0],
                 [0.0, -1.0, 0.0],

@@ -39,6 +39,8 @@ mod sh;
 pub use png::write_png;
 pub use raster::Renderer;
 
+use gems_math::{Intrinsics, Se3};
+
 /// Number of SH coefficients per colour channel stored per Gaussian (degree 3).
 pub const SH_COEFFS: usize = 16;
 
@@ -172,18 +174,31 @@ impl Camera {
         c
     }
 
+    /// The renderer camera of a world-to-camera pose: the f64 camera vocabulary of gems-math
+    /// meets the f32 renderer here and nowhere else.
+    pub fn new(k: &Intrinsics, w2c: &Se3) -> Camera {
+        let (rotation, translation) = w2c.to_f32_arrays();
+        Camera {
+            fx: k.fx as f32,
+            fy: k.fy as f32,
+            cx: k.cx as f32,
+            cy: k.cy as f32,
+            width: k.width,
+            height: k.height,
+            rotation,
+            translation,
+        }
+    }
+
+    /// The renderer camera of a camera-to-world pose (the trajectories' convention).
+    pub fn from_c2w(k: &Intrinsics, c2w: &Se3) -> Camera {
+        Camera::new(k, &c2w.inverse())
+    }
+
     /// A camera at `position` looking at `target`, with image "up" (−y in OpenCV) as close to
     /// `up` as possible. Returns `None` when the view direction is degenerate.
-    // fx, fy, cx, cy, width, height are one camera's intrinsics: one parameter once the workspace
-    // has a single `Intrinsics` type (issue 12), so the signature moves once.
-    #[allow(clippy::too_many_arguments)]
     pub fn look_at(
-        fx: f32,
-        fy: f32,
-        cx: f32,
-        cy: f32,
-        width: u32,
-        height: u32,
+        k: &Intrinsics,
         position: [f32; 3],
         target: [f32; 3],
         up: [f32; 3],
@@ -213,12 +228,12 @@ impl Camera {
                 + rotation[i][2] * position[2]);
         }
         Some(Camera {
-            fx,
-            fy,
-            cx,
-            cy,
-            width,
-            height,
+            fx: k.fx as f32,
+            fy: k.fy as f32,
+            cx: k.cx as f32,
+            cy: k.cy as f32,
+            width: k.width,
+            height: k.height,
             rotation,
             translation,
         })

@@ -259,12 +259,14 @@ proptest! {
 #[test]
 fn look_at_centres_the_target_and_keeps_up_up() {
     let cam = gems_splat::Camera::look_at(
-        100.0,
-        100.0,
-        40.0,
-        30.0,
-        80,
-        60,
+        &gems_math::Intrinsics {
+            fx: 100.0,
+            fy: 100.0,
+            cx: 40.0,
+            cy: 30.0,
+            width: 80,
+            height: 60,
+        },
         [1.0, -2.0, -3.0],
         [0.2, 0.1, 0.3],
         [0.0, -1.0, 0.0],
@@ -290,12 +292,14 @@ fn look_at_centres_the_target_and_keeps_up_up() {
     assert!((c[0] - 1.0).abs() < 1e-5 && (c[1] + 2.0).abs() < 1e-5 && (c[2] + 3.0).abs() < 1e-5);
     assert!(
         gems_splat::Camera::look_at(
-            1.0,
-            1.0,
-            0.0,
-            0.0,
-            4,
-            4,
+            &gems_math::Intrinsics {
+                fx: 1.0,
+                fy: 1.0,
+                cx: 0.0,
+                cy: 0.0,
+                width: 4,
+                height: 4,
+            },
             [0.0; 3],
             [0.0; 3],
             [0.0, 1.0, 0.0]

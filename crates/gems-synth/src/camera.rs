@@ -8,35 +8,10 @@
 use crate::geom::{
     M3, V3, add3, cross3, mat_mul, mat_t_vec, mat_vec, norm3, scale3, so3_exp, sub3,
 };
+use gems_math::{Intrinsics, Pose};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::Serialize;
-
-/// Pinhole intrinsics in pixels.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct Intrinsics {
-    pub width: u32,
-    pub height: u32,
-    pub fx: f64,
-    pub fy: f64,
-    pub cx: f64,
-    pub cy: f64,
-}
-
-impl Intrinsics {
-    /// Square pixels, centred principal point, horizontal field of view `fov_x_deg`.
-    pub fn from_fov(width: u32, height: u32, fov_x_deg: f64) -> Self {
-        let f = 0.5 * f64::from(width) / (0.5 * fov_x_deg.to_radians()).tan();
-        Self {
-            width,
-            height,
-            fx: f,
-            fy: f,
-            cx: 0.5 * f64::from(width),
-            cy: 0.5 * f64::from(height),
-        }
-    }
-}
 
 /// A camera pose: camera-to-world rotation (columns = camera x, y, z axes in world) and centre.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -58,8 +33,8 @@ impl CameraPose {
     }
 
     /// The same pose in gems-data's world-to-camera convention.
-    pub fn to_pose(&self) -> gems_data::Pose {
-        gems_data::Pose::from_camera_to_world(self.rotation, self.centre)
+    pub fn to_pose(&self) -> Pose {
+        Pose::from_camera_to_world(self.rotation, self.centre)
     }
 
     /// World point → camera frame.

@@ -11,10 +11,11 @@ use gems_events::{EventStream, write_events_npz};
 use serde::Serialize;
 
 use crate::SynthError;
-use crate::camera::{CameraPose, Intrinsics, mean_path_length_px};
+use crate::camera::{CameraPose, mean_path_length_px};
 use crate::config::SynthConfig;
 use crate::render::Image;
 use crate::scene::{SynthScene, ViewRender, probe_points};
+use gems_math::Intrinsics;
 
 /// What [`generate`] produced.
 #[derive(Clone, Debug, Serialize)]

@@ -16,7 +16,7 @@
 //! - [`generate_blur_levels`] writes the paper's blur-level study (`blur_01` … `blur_11`).
 //! - [`SynthConfig::tiny`] / [`SynthConfig::small`] / [`SynthConfig::medium`] are the presets.
 //! - [`SynthScene::new`] gives the in-memory ground truth without rendering anything: the
-//!   [`World`] (ray-castable via [`World::intersect`] / [`World::radiance`]), [`Intrinsics`],
+//!   [`World`] (ray-castable via [`World::intersect`] / [`World::radiance`]), [`gems_math::Intrinsics`],
 //!   per-view [`ViewTruth`] (mid pose, exposure motion, depth bounds, blur), and renders of any view
 //!   at any exposure fraction ([`SynthScene::render_sharp`], [`SynthScene::render_view`]).
 //!
@@ -38,7 +38,7 @@ mod world;
 
 use std::path::{Path, PathBuf};
 
-pub use camera::{CameraPose, ExposureMotion, Intrinsics, arc_path, mean_path_length_px};
+pub use camera::{CameraPose, ExposureMotion, arc_path, mean_path_length_px};
 pub use config::{EventOptions, Preset, SynthConfig};
 pub use generate::{
     BLUR_LEVELS, SynthSummary, generate, generate_blur_levels, generate_with_progress, image_name,

@@ -1,7 +1,8 @@
 //! Antialiased ray-cast rendering of the [`World`] and the sRGB transfer function.
 
-use crate::camera::{CameraPose, Intrinsics};
+use crate::camera::CameraPose;
 use crate::world::{World, pixel_jitter};
+use gems_math::Intrinsics;
 use rayon::prelude::*;
 
 /// An RGB image, row-major, interleaved, f32 per channel.

@@ -6,11 +6,12 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::SynthError;
-use crate::camera::{CameraPose, ExposureMotion, Intrinsics, arc_path, mean_path_length_px};
+use crate::camera::{CameraPose, ExposureMotion, arc_path, mean_path_length_px};
 use crate::config::SynthConfig;
 use crate::geom::V3;
 use crate::render::{Image, encode_srgb, render_linear};
 use crate::world::World;
+use gems_math::Intrinsics;
 
 /// Ground truth of one view.
 #[derive(Clone, Debug)]

@@ -9,10 +9,10 @@
 //! timed window.
 
 use gems_gpu::DeviceChoice;
+use gems_math::Intrinsics;
 use gems_math::{Se3, Vector6};
-use gems_splat::{Gaussians, RenderSettings, Renderer};
+use gems_splat::{Camera, Gaussians, RenderSettings, Renderer};
 use gems_train::TrainConfig;
-use gems_train::blur::{Intrinsics, camera_from_c2w};
 use gems_train::engine::Engine;
 use gems_train::normalize::Normalization;
 use gems_train::trainer::{TrainInput, TrainView, Trainer};
@@ -64,7 +64,7 @@ fn trainer() -> Trainer {
     let target = Renderer::new()
         .forward(
             &g,
-            &[camera_from_c2w(&c2w, &k)],
+            &[Camera::from_c2w(&k, &c2w)],
             &[[0.0; 3]],
             &RenderSettings::default(),
         )

@@ -9,20 +9,19 @@
 //! gradient w.r.t. the right perturbation of c2w_k (= of Δ(u_k), since c2w₀ is a constant left
 //! factor), and each knot j receives Σ_k J_jkᵀ · g_k.
 
-use gems_math::{Se3, Trajectory, c2w_right_perturbation_gradient};
+use gems_math::{Intrinsics, Se3, Trajectory, c2w_right_perturbation_gradient};
 use gems_splat::{Camera, Gaussians, Gradients};
 
 use crate::TrainError;
 
-/// Pinhole intrinsics of a training image.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Intrinsics {
-    pub fx: f32,
-    pub fy: f32,
-    pub cx: f32,
-    pub cy: f32,
-    pub width: u32,
-    pub height: u32,
+/// One blurry image's exposure as the blur model sees it: the initial camera-to-world pose, the
+/// trajectory Δ(u) over the exposure, the virtual-camera times u_k and the camera.
+#[derive(Clone, Copy, Debug)]
+pub struct Exposure<'a> {
+    pub c2w_init: &'a Se3,
+    pub trajectory: &'a Trajectory,
+    pub times: &'a [f64],
+    pub intrinsics: &'a Intrinsics,
 }
 
 /// A differentiable renderer of C cameras of one scene (the CPU or GPU engine, or the f64
@@ -69,21 +68,6 @@ impl Rasterizer for crate::engine::Engine {
     }
 }
 
-/// The renderer camera (world-to-camera) of a camera-to-world pose.
-pub fn camera_from_c2w(c2w: &Se3, k: &Intrinsics) -> Camera {
-    let (rotation, translation) = c2w.inverse().to_f32_arrays();
-    Camera {
-        fx: k.fx,
-        fy: k.fy,
-        cx: k.cx,
-        cy: k.cy,
-        width: k.width,
-        height: k.height,
-        rotation,
-        translation,
-    }
-}
-
 /// The n virtual camera-to-world poses c2w₀·Δ(u_k).
 pub fn virtual_c2w(c2w_init: &Se3, traj: &Trajectory, times: &[f64]) -> Vec<Se3> {
     times.iter().map(|&u| *c2w_init * traj.eval(u)).collect()
@@ -101,20 +85,15 @@ pub struct BlurWorkspace {
 }
 
 /// Renders the blurred image of a view into `ws.blurred` (and keeps the cameras in `ws.cams`).
-// Eight parameters until the camera types are unified (issue 12): the view's exposure (initial
-// pose, trajectory, times, intrinsics) becomes one struct then, so the signature moves once.
-#[allow(clippy::too_many_arguments)]
 pub fn render_blurred<R: Rasterizer + ?Sized>(
     r: &mut R,
     g: &Gaussians,
-    c2w_init: &Se3,
-    traj: &Trajectory,
-    times: &[f64],
-    k: &Intrinsics,
+    exposure: &Exposure,
     bg: [f32; 3],
     ws: &mut BlurWorkspace,
 ) -> Result<(), TrainError> {
-    virtual_cameras(c2w_init, traj, times, k, &mut ws.cams);
+    let (times, k) = (exposure.times, exposure.intrinsics);
+    virtual_cameras(exposure, &mut ws.cams);
     ws.bgs.clear();
     ws.bgs.resize(times.len(), bg);
     let rgb = r.render(g, &ws.cams, &ws.bgs)?;
@@ -136,12 +115,12 @@ pub fn render_blurred<R: Rasterizer + ?Sized>(
 pub fn backward_blurred<R: Rasterizer + ?Sized>(
     r: &mut R,
     g: &Gaussians,
-    traj: &Trajectory,
-    times: &[f64],
+    exposure: &Exposure,
     d_blurred: &[f32],
     ws: &mut BlurWorkspace,
     knot_grads: &mut [[f64; 6]],
 ) -> Result<Gradients, TrainError> {
+    let times = exposure.times;
     let inv_n = 1.0 / times.len() as f32;
     ws.d_rgb.clear();
     for _ in 0..times.len() {
@@ -149,7 +128,7 @@ pub fn backward_blurred<R: Rasterizer + ?Sized>(
     }
     let grads = r.gradients(g, &ws.cams, &ws.bgs, &ws.d_rgb)?;
     accumulate_knot_gradients(
-        traj,
+        exposure.trajectory,
         times,
         &ws.cams,
         &grads.cam_rotation,
@@ -160,18 +139,18 @@ pub fn backward_blurred<R: Rasterizer + ?Sized>(
 }
 
 /// The n virtual cameras of a view (world-to-camera, for the renderer) into `out`.
-pub fn virtual_cameras(
-    c2w_init: &Se3,
-    traj: &Trajectory,
-    times: &[f64],
-    k: &Intrinsics,
-    out: &mut Vec<Camera>,
-) {
+pub fn virtual_cameras(exposure: &Exposure, out: &mut Vec<Camera>) {
+    let Exposure {
+        c2w_init,
+        trajectory,
+        times,
+        intrinsics,
+    } = *exposure;
     out.clear();
     out.extend(
         times
             .iter()
-            .map(|&u| camera_from_c2w(&(*c2w_init * traj.eval(u)), k)),
+            .map(|&u| Camera::from_c2w(intrinsics, &(*c2w_init * trajectory.eval(u)))),
     );
 }
 

@@ -10,6 +10,7 @@
 //! refinement *period* stays an absolute step count (gsplat: 100): each refinement grows the set
 //! by 5 %, so a period that shrank with the run would multiply the Gaussians of a short run.
 
+use gems_math::{BEZIER_DEFAULT_KNOTS, TrajectoryKind};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -17,18 +18,6 @@ use crate::TrainError;
 
 /// Length of the reference run whose behaviour the default schedules reproduce.
 pub const REFERENCE_STEPS: usize = 7000;
-
-/// Parametrisation of a per-image exposure trajectory (the paper's ablation).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum TrajectoryKind {
-    /// Product of Bernstein-weighted exponentials over `bezier_knots` control knots (GeMS Eq. 8).
-    Bezier,
-    /// Two knots, split SO(3)×R³ linear interpolation.
-    Linear,
-    /// Four knots, uniform cumulative cubic B-spline.
-    Spline,
-}
 
 /// Adam learning rates of the Gaussian parameter groups (gsplat / 3DGS values).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -243,7 +232,7 @@ impl Default for TrainConfig {
             seed: 0,
             num_virtual_views: 15,
             trajectory: TrajectoryKind::Bezier,
-            bezier_knots: 9,
+            bezier_knots: BEZIER_DEFAULT_KNOTS,
             ssim_lambda: 0.3,
             sh_degree: 3,
             sh_degree_interval_fraction: 1000.0 / REFERENCE_STEPS as f64,
@@ -314,11 +303,7 @@ impl TrainConfig {
 
     /// Number of trajectory control knots for the configured kind.
     pub fn num_knots(&self) -> usize {
-        match self.trajectory {
-            TrajectoryKind::Bezier => self.bezier_knots,
-            TrajectoryKind::Linear => 2,
-            TrajectoryKind::Spline => 4,
-        }
+        self.trajectory.knots(self.bezier_knots)
     }
 
     /// Exposure times of the virtual cameras: linspace(0, 1, n), endpoints included.

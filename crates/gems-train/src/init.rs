@@ -196,12 +196,14 @@ mod tests {
     #[test]
     fn random_points_project_inside_some_camera_at_valid_depth() {
         let cam = Camera::look_at(
-            50.0,
-            50.0,
-            32.0,
-            24.0,
-            64,
-            48,
+            &gems_math::Intrinsics {
+                fx: 50.0,
+                fy: 50.0,
+                cx: 32.0,
+                cy: 24.0,
+                width: 64,
+                height: 48,
+            },
             [0.0, 0.0, -3.0],
             [0.0; 3],
             [0.0, 1.0, 0.0],

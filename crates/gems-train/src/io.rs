@@ -9,18 +9,17 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use gems_math::{Se3, Trajectory};
+use gems_math::{Intrinsics, Pose, Trajectory};
 use gems_splat::{Gaussians, SH_COEFFS};
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
 use crate::adam::AdamState;
-use crate::blur::Intrinsics;
 use crate::config::TrainConfig;
 use crate::mcmc::GaussianAdam;
 use crate::normalize::Normalization;
-use crate::trainer::{History, TrainState, TrainView, Trainer, math_kind};
+use crate::trainer::{History, TrainState, TrainView, Trainer};
 
 /// Writes `bytes` to `path` atomically (gems-data's temporary file + rename).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
@@ -292,29 +291,6 @@ pub fn load_checkpoint(dir: &Path) -> Result<(TrainConfig, TrainState), TrainErr
     Ok((meta.config, state))
 }
 
-/// A rigid pose as plain arrays (row-major rotation), for files.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Pose {
-    pub rotation: [[f64; 3]; 3],
-    pub translation: [f64; 3],
-}
-
-impl From<&Se3> for Pose {
-    fn from(p: &Se3) -> Self {
-        let (rotation, translation) = p.to_arrays();
-        Self {
-            rotation,
-            translation,
-        }
-    }
-}
-
-impl From<&Pose> for Se3 {
-    fn from(p: &Pose) -> Self {
-        Se3::from_arrays(&p.rotation, &p.translation)
-    }
-}
-
 /// The trained trajectory of one training image (normalised frame, camera-to-world).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ViewResult {
@@ -415,8 +391,7 @@ impl TrainOutput {
 
     /// The trajectory Δ(u) of view `v`.
     pub fn trajectory(&self, v: usize) -> Trajectory {
-        let kind = math_kind(self.config.trajectory);
-        Trajectory::new(kind, self.views[v].knots.clone())
+        Trajectory::new(self.config.trajectory, self.views[v].knots.clone())
             .expect("knot count matches the kind: built by the trainer or checked by `load`")
     }
 

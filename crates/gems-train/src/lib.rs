@@ -40,7 +40,7 @@ pub mod normalize;
 pub mod prepare;
 pub mod trainer;
 
-pub use config::{TrainConfig, TrajectoryKind};
+pub use config::TrainConfig;
 
 use std::path::{Path, PathBuf};
 

@@ -12,14 +12,14 @@
 
 use std::path::{Path, PathBuf};
 
-use gems_data::{Pose as DataPose, Scene, colmap::SparseModel, load_image};
-use gems_math::{Matrix3, Se3, Vector3, Vector6};
+use gems_data::{Scene, colmap::SparseModel, load_image};
+use gems_math::{Intrinsics, Matrix3, Pose, Se3, Vector3, Vector6};
+use gems_splat::Camera;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use crate::TrainError;
-use crate::blur::{Intrinsics, camera_from_c2w};
 use crate::config::TopUp;
 use crate::config::TrainConfig;
 use crate::init::{from_points, near_points, random_in_frustums};
@@ -72,7 +72,7 @@ struct RawView {
     gt_subframes: Vec<Se3>,
 }
 
-fn c2w_of(p: &DataPose) -> Se3 {
+fn c2w_of(p: &Pose) -> Se3 {
     Se3::from_arrays(&p.rotation, &p.translation).inverse()
 }
 
@@ -80,7 +80,7 @@ fn c2w_of(p: &DataPose) -> Se3 {
 /// else the middle of its ground-truth sub-frame poses (ExBluRF/E2NeRF-style
 /// `poses_bounds_subframes.npy`), i.e. the mid-exposure pose. With an even number of sub-frames
 /// it is halfway along the SE(3) geodesic between the two middle ones.
-fn gt_c2w(gt_pose: Option<&DataPose>, subframes: Option<&[DataPose]>) -> Option<Se3> {
+fn gt_c2w(gt_pose: Option<&Pose>, subframes: Option<&[Pose]>) -> Option<Se3> {
     if let Some(p) = gt_pose {
         return Some(c2w_of(p));
     }
@@ -114,7 +114,7 @@ fn load_model(dir: &Path) -> Result<SparseModel, TrainError> {
 
 /// The 5th–95th percentile depth range (widened by 20 %) of `points` seen by `cams`, or `None`
 /// when no point lies in front of a camera.
-fn depth_range(points: &[[f32; 3]], cams: &[gems_splat::Camera]) -> Option<(f32, f32)> {
+fn depth_range(points: &[[f32; 3]], cams: &[Camera]) -> Option<(f32, f32)> {
     let mut depths: Vec<f32> = cams
         .iter()
         .flat_map(|c| {
@@ -217,18 +217,10 @@ pub fn prepare_input(
                 k.height
             )));
         }
-        let intr = Intrinsics {
-            fx: k.fx as f32,
-            fy: k.fy as f32,
-            cx: k.cx as f32,
-            cy: k.cy as f32,
-            width: k.width,
-            height: k.height,
-        };
         raw.push(RawView {
             name: v.name.clone(),
             image: img.data,
-            intrinsics: intr,
+            intrinsics: k,
             c2w: c2w_of(&pose),
             gt: gt_c2w(v.gt_pose.as_ref(), v.gt_subframe_poses.as_deref()),
             gt_subframes: v.gt_subframe_poses.iter().flatten().map(c2w_of).collect(),
@@ -313,7 +305,7 @@ pub fn prepare_input(
 
     let cams: Vec<_> = views
         .iter()
-        .map(|v| camera_from_c2w(&v.c2w_init, &v.intrinsics))
+        .map(|v| Camera::from_c2w(&v.intrinsics, &v.c2w_init))
         .collect();
     // MCMC never removes Gaussians, so an initial cloud above its cap would stay above it.
     let (min_points, random_points) = (
@@ -375,7 +367,7 @@ pub fn prepare_input(
 mod tests {
     use super::*;
 
-    fn pose_at(x: f64, yaw: f64) -> DataPose {
+    fn pose_at(x: f64, yaw: f64) -> Pose {
         let c2w = Se3::exp(&Vector6::new(x, 0.0, 0.0, 0.0, yaw, 0.0));
         let w2c = c2w.inverse();
         let mut rotation = [[0.0; 3]; 3];
@@ -384,7 +376,7 @@ mod tests {
                 *v = w2c.rot[(i, j)];
             }
         }
-        DataPose {
+        Pose {
             rotation,
             translation: [w2c.trans[0], w2c.trans[1], w2c.trans[2]],
         }
@@ -393,8 +385,8 @@ mod tests {
     #[test]
     fn ground_truth_is_the_explicit_pose_else_the_mid_subframe() {
         let explicit = pose_at(5.0, 0.0);
-        let odd: Vec<DataPose> = (0..5).map(|i| pose_at(0.1 * i as f64, 0.0)).collect();
-        let even: Vec<DataPose> = (0..4)
+        let odd: Vec<Pose> = (0..5).map(|i| pose_at(0.1 * i as f64, 0.0)).collect();
+        let even: Vec<Pose> = (0..4)
             .map(|i| pose_at(0.1 * i as f64, 0.02 * i as f64))
             .collect();
         let centre = |s: Se3| s.trans;

@@ -26,9 +26,9 @@
 use std::time::Instant;
 
 use gems_gpu::{AdamConfig, GaussianLrs, GroupMoments, NoiseParams, ResidentStep, StepSettings};
-use gems_math::{Se3, Trajectory};
+use gems_math::{Intrinsics, Se3, Trajectory};
 use gems_metrics::TrainingLoss;
-use gems_splat::{Gaussians, Gradients, RenderSettings};
+use gems_splat::{Camera, Gaussians, Gradients, RenderSettings};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -37,10 +37,10 @@ use serde::{Deserialize, Serialize};
 use crate::TrainError;
 use crate::adam::{AdamHyper, AdamState};
 use crate::blur::{
-    BlurWorkspace, Intrinsics, Rasterizer, accumulate_knot_gradients, backward_blurred,
+    BlurWorkspace, Exposure, Rasterizer, accumulate_knot_gradients, backward_blurred,
     render_blurred, virtual_cameras,
 };
-use crate::config::{TrainConfig, TrajectoryKind};
+use crate::config::TrainConfig;
 use crate::engine::Engine;
 use crate::mcmc::{
     BinomialTable, GaussianAdam, add_new, growth_draws, inject_noise, relocate_dead,
@@ -119,14 +119,6 @@ pub struct StepReport {
     pub gaussians: usize,
 }
 
-pub(crate) fn math_kind(k: TrajectoryKind) -> gems_math::TrajectoryKind {
-    match k {
-        TrajectoryKind::Bezier => gems_math::TrajectoryKind::Bezier,
-        TrajectoryKind::Linear => gems_math::TrajectoryKind::Linear,
-        TrajectoryKind::Spline => gems_math::TrajectoryKind::CubicBSpline,
-    }
-}
-
 /// The trajectory of view `v` from the flat knot array.
 pub fn trajectory_of(cfg: &TrainConfig, knots: &[f32], v: usize) -> Trajectory {
     let k = cfg.num_knots();
@@ -134,7 +126,7 @@ pub fn trajectory_of(cfg: &TrainConfig, knots: &[f32], v: usize) -> Trajectory {
         .chunks_exact(6)
         .map(|c| std::array::from_fn(|i| c[i] as f64))
         .collect();
-    Trajectory::new(math_kind(cfg.trajectory), ks).expect("knot count comes from the config")
+    Trajectory::new(cfg.trajectory, ks).expect("knot count comes from the config")
 }
 
 /// PSNR (data range 1, clamped) of two same-size buffers.
@@ -519,13 +511,16 @@ impl Trainer {
     ) -> Result<(f32, f32), TrainError> {
         let view = &self.views[v];
         let k = view.intrinsics;
+        let exposure = Exposure {
+            c2w_init: &view.c2w_init,
+            trajectory: traj,
+            times: &self.times,
+            intrinsics: &k,
+        };
         render_blurred(
             &mut self.renderer,
             &self.state.gaussians,
-            &view.c2w_init,
-            traj,
-            &self.times,
-            &k,
+            &exposure,
             bg,
             &mut self.ws,
         )?;
@@ -537,11 +532,17 @@ impl Trainer {
             .compute(&self.ws.blurred, &view.image, &mut self.d_blurred)
             .map_err(|e| TrainError::Input(format!("view {}: {e}", view.name)))?;
         let train_psnr = psnr(&self.ws.blurred, &view.image);
+        let view = &self.views[v];
+        let exposure = Exposure {
+            c2w_init: &view.c2w_init,
+            trajectory: traj,
+            times: &self.times,
+            intrinsics: &k,
+        };
         let mut grads = backward_blurred(
             &mut self.renderer,
             &self.state.gaussians,
-            traj,
-            &self.times,
+            &exposure,
             &self.d_blurred,
             &mut self.ws,
             &mut self.knot_grads,
@@ -568,10 +569,12 @@ impl Trainer {
         };
         let view = &self.views[v];
         virtual_cameras(
-            &view.c2w_init,
-            traj,
-            &self.times,
-            &view.intrinsics,
+            &Exposure {
+                c2w_init: &view.c2w_init,
+                trajectory: traj,
+                times: &self.times,
+                intrinsics: &view.intrinsics,
+            },
             &mut self.ws.cams,
         );
         let c = &self.cfg;
@@ -760,7 +763,7 @@ impl Trainer {
         self.sync()?;
         let mut g = self.state.gaussians.clone();
         g.sh_degree = self.cfg.sh_degree;
-        let cam = crate::blur::camera_from_c2w(c2w, k);
+        let cam = Camera::from_c2w(k, c2w);
         self.renderer.render(&g, &[cam], &[[0.0; 3]])
     }
 }

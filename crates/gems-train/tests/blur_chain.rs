@@ -6,8 +6,9 @@
 mod common;
 
 use gems_math::{Trajectory, TrajectoryKind};
+use gems_splat::Camera;
 use gems_splat::reference;
-use gems_train::blur::{BlurWorkspace, backward_blurred, camera_from_c2w, render_blurred};
+use gems_train::blur::{BlurWorkspace, Exposure, backward_blurred, render_blurred};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -30,16 +31,22 @@ fn knot_gradients_match_finite_differences_of_the_blurred_loss() {
 
     let mut ws = BlurWorkspace::default();
     let mut r = common::Reference(common::smooth_settings());
-    render_blurred(&mut r, &g, &c2w0, &traj, &times, &k, bg, &mut ws).unwrap();
+    let exposure = Exposure {
+        c2w_init: &c2w0,
+        trajectory: &traj,
+        times: &times,
+        intrinsics: &k,
+    };
+    render_blurred(&mut r, &g, &exposure, bg, &mut ws).unwrap();
     let mut analytic = vec![[0.0f64; 6]; 4];
-    backward_blurred(&mut r, &g, &traj, &times, &w, &mut ws, &mut analytic).unwrap();
+    backward_blurred(&mut r, &g, &exposure, &w, &mut ws, &mut analytic).unwrap();
 
     // f64 loss straight from the reference renderer.
     let loss = |knots: &[[f64; 6]]| -> f64 {
         let t = Trajectory::new(TrajectoryKind::Bezier, knots.to_vec()).unwrap();
         let cams: Vec<_> = times
             .iter()
-            .map(|&u| camera_from_c2w(&(c2w0 * t.eval(u)), &k))
+            .map(|&u| Camera::from_c2w(&k, &(c2w0 * t.eval(u))))
             .collect();
         let out = reference::forward(&g, &cams, &vec![bg; cams.len()], &common::smooth_settings())
             .unwrap();

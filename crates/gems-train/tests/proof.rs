@@ -17,10 +17,11 @@
 
 mod common;
 
+use gems_math::TrajectoryKind;
 use gems_math::{Alignment, ape_translation};
+use gems_train::TrainConfig;
 use gems_train::normalize::Normalization;
 use gems_train::trainer::{TrainInput, Trainer, psnr};
-use gems_train::{TrainConfig, TrajectoryKind};
 
 struct Outcome {
     mid_psnr: f64,

@@ -9,6 +9,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
+use gems_math::{Intrinsics, Se3};
 use gems_splat::{Camera, RenderSettings, ply, write_png};
 
 /// Arguments of `gems render`.
@@ -109,17 +110,7 @@ fn colmap_camera(dir: &std::path::Path, name: &str) -> anyhow::Result<Camera> {
         .camera(image.camera_id)
         .with_context(|| format!("camera {} of image `{name}` is missing", image.camera_id))?;
     let k = cam.intrinsics().map_err(anyhow::Error::msg)?;
-    let pose = image.pose();
-    Ok(Camera {
-        fx: k.fx as f32,
-        fy: k.fy as f32,
-        cx: k.cx as f32,
-        cy: k.cy as f32,
-        width: k.width,
-        height: k.height,
-        rotation: pose.rotation.map(|r| r.map(|v| v as f32)),
-        translation: pose.translation.map(|v| v as f32),
-    })
+    Ok(Camera::new(&k, &Se3::from(image.pose())))
 }
 
 /// Builds the camera from the arguments, rejecting contradictory or incomplete poses.
@@ -153,21 +144,20 @@ pub fn camera(args: &Args) -> anyhow::Result<Camera> {
     if !(fx > 0.0 && fy > 0.0 && fx.is_finite() && fy.is_finite()) {
         bail!("focal lengths must be positive");
     }
+    // The arguments are f32; widening them is exact, so the renderer sees them unchanged.
+    let k = Intrinsics {
+        fx: f64::from(fx),
+        fy: f64::from(fy),
+        cx: f64::from(cx),
+        cy: f64::from(cy),
+        width: args.width,
+        height: args.height,
+    };
     let look = (args.cam_pos, args.look_at);
     let explicit = (args.rotation, args.translation);
     match (look, explicit) {
-        ((Some(pos), Some(target)), (None, None)) => Camera::look_at(
-            fx,
-            fy,
-            cx,
-            cy,
-            args.width,
-            args.height,
-            pos,
-            target,
-            args.up,
-        )
-        .context("--cam-pos equals --look-at, or the view direction is parallel to --up"),
+        ((Some(pos), Some(target)), (None, None)) => Camera::look_at(&k, pos, target, args.up)
+            .context("--cam-pos equals --look-at, or the view direction is parallel to --up"),
         ((None, None), (Some(rotation), Some(translation))) => {
             let r = rotation;
             // R must be a rotation: RᵀR = I within f32 tolerance.
@@ -180,16 +170,12 @@ pub fn camera(args: &Args) -> anyhow::Result<Camera> {
                     }
                 }
             }
-            Ok(Camera {
-                fx,
-                fy,
-                cx,
-                cy,
-                width: args.width,
-                height: args.height,
-                rotation,
-                translation,
-            })
+            // Widened exactly (no re-orthonormalisation): the renderer gets the given matrix.
+            let w2c = Se3::from_arrays(
+                &rotation.map(|row| row.map(f64::from)),
+                &translation.map(f64::from),
+            );
+            Ok(Camera::new(&k, &w2c))
         }
         _ => bail!(
             "give the pose as --cam-pos and --look-at, or as --rotation and --translation (not both)"

@@ -1,9 +1,9 @@
 //! A small deterministic test scene: colourful Gaussians in front of a camera.
 #![allow(dead_code)]
 
+use gems_math::Intrinsics;
 use gems_math::{Se3, Vector3, Vector6, look_at_c2w};
 use gems_splat::Gaussians;
-use gems_train::blur::Intrinsics;
 
 /// `n` Gaussians of log-scale around `log_scale`, means in a box of half-size (2, 1.5, 1)·`spread`.
 pub fn scene(n: u32, log_scale: f32, spread: f32) -> Gaussians {
@@ -58,10 +58,7 @@ pub fn reprojection_error(g: &Gaussians, k: &Intrinsics, a: &Se3, b: &Se3) -> f6
         let q = c2w
             .inverse()
             .act(&Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64));
-        (
-            k.fx as f64 * q.x / q.z + k.cx as f64,
-            k.fy as f64 * q.y / q.z + k.cy as f64,
-        )
+        (k.fx * q.x / q.z + k.cx, k.fy * q.y / q.z + k.cy)
     };
     g.means
         .iter()

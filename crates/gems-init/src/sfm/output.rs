@@ -146,7 +146,7 @@ pub fn to_colmap_model(r: &SfmResult) -> SparseModel {
         .filter_map(|(i, v)| {
             let p = v.pose?;
             let m = p.r.matrix();
-            let pose = gems_data::Pose {
+            let pose = gems_math::Pose {
                 rotation: [
                     [m[(0, 0)], m[(0, 1)], m[(0, 2)]],
                     [m[(1, 0)], m[(1, 1)], m[(1, 2)]],

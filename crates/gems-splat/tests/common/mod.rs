@@ -213,13 +213,17 @@ pub fn random_scene(
                 -4.0 * a.cos(),
             ];
             let f = w as f32 * 0.9;
+            // Computed in f32 and widened exactly, so the cameras are those the parity
+            // tolerances were set on.
             Camera::look_at(
-                f,
-                f * 1.02,
-                w as f32 * 0.5 + 0.3,
-                h as f32 * 0.5 - 0.2,
-                w,
-                h,
+                &gems_math::Intrinsics {
+                    fx: f64::from(f),
+                    fy: f64::from(f * 1.02),
+                    cx: f64::from(w as f32 * 0.5 + 0.3),
+                    cy: f64::from(h as f32 * 0.5 - 0.2),
+                    width: w,
+                    height: h,
+                },
                 pos,
                 [0.0, 0.0, 0.0],
                 [0.0, -1.0, 0.0],

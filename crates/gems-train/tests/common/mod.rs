@@ -2,9 +2,10 @@
 //! cameras looking at it, each with a known exposure trajectory.
 #![allow(dead_code)]
 
+use gems_math::Intrinsics;
 use gems_math::{Se3, Vector3, Vector6};
 use gems_splat::{Camera, Gaussians, Gradients, RenderSettings, reference};
-use gems_train::blur::{Intrinsics, Rasterizer};
+use gems_train::blur::Rasterizer;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -29,10 +30,10 @@ pub fn wall(n: usize, seed: u64, extent: f32) -> Gaussians {
 
 pub fn intrinsics(w: u32, h: u32) -> Intrinsics {
     Intrinsics {
-        fx: w as f32 * 0.9,
-        fy: w as f32 * 0.9,
-        cx: w as f32 / 2.0,
-        cy: h as f32 / 2.0,
+        fx: f64::from(w as f32 * 0.9),
+        fy: f64::from(w as f32 * 0.9),
+        cx: f64::from(w) / 2.0,
+        cy: f64::from(h) / 2.0,
         width: w,
         height: h,
     }
@@ -132,7 +133,7 @@ pub fn blur_scene(
     pose_noise: f64,
     seed: u64,
 ) -> BlurScene {
-    use gems_train::blur::camera_from_c2w;
+    use gems_splat::Camera;
     let gt = wall(500, seed, 2.0);
     let k = intrinsics(w, h);
     let mut rng = ChaCha8Rng::seed_from_u64(seed + 1);
@@ -162,7 +163,7 @@ pub fn blur_scene(
             0.1 * motion,
         ]);
         let cams: Vec<Camera> = (0..21)
-            .map(|i| camera_from_c2w(&(mid * Se3::exp(&(m * (i as f64 / 20.0 - 0.5)))), &k))
+            .map(|i| Camera::from_c2w(&k, &(mid * Se3::exp(&(m * (i as f64 / 20.0 - 0.5))))))
             .collect();
         let rgb = r
             .forward(
@@ -183,7 +184,7 @@ pub fn blur_scene(
         let sharp = r
             .forward(
                 &g,
-                &[camera_from_c2w(&mid, &k)],
+                &[Camera::from_c2w(&k, &mid)],
                 &[[0.0; 3]],
                 &RenderSettings::default(),
             )

@@ -1,10 +1,14 @@
-//! Camera poses and intrinsics in the one convention used across gems.
+//! The camera vocabulary shared by every gems crate: one [`Pose`] (a rigid transform in plain
+//! arrays, what files store) and one [`Intrinsics`] (pinhole, f64), beside [`Se3`] for the maths.
 //!
-//! A [`Pose`] is **world-to-camera** (`x_cam = R · x_world + t`) with an OpenCV camera frame
-//! (x right, y down, z forward), in f64. Readers of other conventions (LLFF, nerfstudio/OpenGL)
-//! convert on load; writers convert back.
+//! Convention: a scene's [`Pose`] is **world-to-camera** (`x_cam = R · x_world + t`) with an
+//! OpenCV camera frame (x right, y down, z forward), in f64. Readers of other conventions (LLFF,
+//! nerfstudio/OpenGL) convert on load; writers convert back. A field named `c2w_*` holds the
+//! inverse transform in the same type (the trained trajectories are camera-to-world).
 
 use serde::{Deserialize, Serialize};
+
+use crate::Se3;
 
 /// A rigid world-to-camera transform: `x_cam = rotation · x_world + translation`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -25,7 +29,7 @@ impl Pose {
     /// Pose from a Hamilton unit quaternion `[w, x, y, z]` (normalised here) and a translation,
     /// both world-to-camera as COLMAP stores them.
     pub fn from_quaternion(q: [f64; 4], translation: [f64; 3]) -> Pose {
-        let m = gems_math::quat_wxyz_to_rotation(q);
+        let m = crate::convert::quat_wxyz_to_rotation(q);
         let rotation = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]));
         Pose {
             rotation,
@@ -145,7 +149,7 @@ impl Pose {
 }
 
 /// Largest entry of `|RᵀR − I|` plus `|det R − 1|`.
-pub(crate) fn rotation_error(r: &[[f64; 3]; 3]) -> f64 {
+pub fn rotation_error(r: &[[f64; 3]; 3]) -> f64 {
     let mut err: f64 = 0.0;
     for i in 0..3 {
         for j in 0..3 {
@@ -198,6 +202,19 @@ pub struct Intrinsics {
 }
 
 impl Intrinsics {
+    /// Square pixels, centred principal point, horizontal field of view `fov_x_deg`.
+    pub fn from_fov(width: u32, height: u32, fov_x_deg: f64) -> Self {
+        let f = 0.5 * f64::from(width) / (0.5 * fov_x_deg.to_radians()).tan();
+        Self {
+            width,
+            height,
+            fx: f,
+            fy: f,
+            cx: 0.5 * f64::from(width),
+            cy: 0.5 * f64::from(height),
+        }
+    }
+
     /// The same camera for an image resized to `width × height` (e.g. a downscaled copy): focal
     /// lengths and principal point scale with the per-axis size ratio.
     pub fn resized(&self, width: u32, height: u32) -> Intrinsics {
@@ -223,21 +240,33 @@ impl Intrinsics {
     }
 }
 
-impl From<Pose> for gems_math::Se3 {
-    /// The same world-to-camera transform as a `gems_math::Se3` (`p ↦ R p + t`).
-    fn from(p: Pose) -> Self {
-        gems_math::Se3::from_arrays(&p.rotation, &p.translation)
+impl From<&Pose> for Se3 {
+    /// The same transform as an [`Se3`] (`p ↦ R p + t`).
+    fn from(p: &Pose) -> Self {
+        Se3::from_arrays(&p.rotation, &p.translation)
     }
 }
 
-impl From<gems_math::Se3> for Pose {
-    /// A world-to-camera `gems_math::Se3` as a plain [`Pose`].
-    fn from(s: gems_math::Se3) -> Self {
+impl From<Pose> for Se3 {
+    fn from(p: Pose) -> Self {
+        Se3::from(&p)
+    }
+}
+
+impl From<&Se3> for Pose {
+    /// An [`Se3`] as a plain [`Pose`].
+    fn from(s: &Se3) -> Self {
         let (rotation, translation) = s.to_arrays();
         Pose {
             rotation,
             translation,
         }
+    }
+}
+
+impl From<Se3> for Pose {
+    fn from(s: Se3) -> Self {
+        Pose::from(&s)
     }
 }
 
