@@ -32,26 +32,26 @@
 //! ```
 
 pub mod browser;
-pub mod evaluate;
+mod metrics;
+mod protocol;
 pub mod refine;
 pub mod report;
-pub mod trainer_eval;
 pub mod tum;
 pub mod viewer;
 
 use std::path::{Path, PathBuf};
 
-pub use evaluate::{
+pub use metrics::{
     ApeSummary, EvalView, ImageScore, MetricsReport, PoseMode, SplitResult, SplitScores,
     ape_of_centres, evaluate_views, evaluate_views_with_progress, score_image,
 };
-pub use refine::{PoseRefineConfig, Refined, refine_pose};
-pub use report::{GridRow, ReportInput, write_report};
-pub use trainer_eval::{
+pub use protocol::{
     EvalData, Evaluation, HeldOutView, attach_edi_images, eval_data_from_scene, evaluate_output,
     evaluate_output_on, evaluate_output_with_progress, evaluation_units, open_scene_for,
     report_input, write_renders, write_renders_on, write_trajectories,
 };
+pub use refine::{PoseRefineConfig, Refined, refine_pose};
+pub use report::{GridRow, ReportInput, write_report};
 
 /// Errors of evaluation and export. Every file error names the file.
 #[derive(Debug, thiserror::Error)]

@@ -10,7 +10,7 @@ use gems_math::{Matrix3, Vector3, umeyama};
 use plotters::prelude::*;
 
 use crate::EvalError;
-use crate::evaluate::{MetricsReport, SplitScores};
+use crate::metrics::{MetricsReport, SplitScores};
 
 /// One row of the comparison grid; images `[H,W,3]`.
 #[derive(Clone, Debug)]

@@ -8,10 +8,12 @@ use gems_train::prepare::InitMode;
 
 use crate::PipelineError;
 
-/// Initialisation of poses and points.
+/// Initialisation of poses and points. With the `clap` feature it is also a clap value enum
+/// (the doc lines below are then the command line's help).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Init {
-    /// The scene's COLMAP sparse model (or the one in [`InitRequest::colmap_model`]).
+    /// The scene's COLMAP sparse model (or the one given with --colmap-model).
     Colmap,
     /// Ground-truth poses.
     Gt,

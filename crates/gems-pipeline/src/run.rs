@@ -209,7 +209,7 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
             metrics: None,
         });
     }
-    let scene = gems_eval::trainer_eval::open_scene_for(&output, job.scene, &job.open)?;
+    let scene = gems_eval::open_scene_for(&output, job.scene, &job.open)?;
     let mut data = gems_eval::eval_data_from_scene(&output, &scene)?;
     attach_edi(&mut data, &output, job.output)?;
     let lpips = if job.lpips.is_empty() {

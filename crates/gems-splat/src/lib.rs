@@ -178,6 +178,11 @@ impl Camera {
     /// meets the f32 renderer here and nowhere else.
     pub fn new(k: &Intrinsics, w2c: &Se3) -> Camera {
         let (rotation, translation) = w2c.to_f32_arrays();
+        Camera::with_pose(k, rotation, translation)
+    }
+
+    /// `k` narrowed to f32 with an f32 world-to-camera pose.
+    fn with_pose(k: &Intrinsics, rotation: [[f32; 3]; 3], translation: [f32; 3]) -> Camera {
         Camera {
             fx: k.fx as f32,
             fy: k.fy as f32,
@@ -227,16 +232,7 @@ impl Camera {
                 + rotation[i][1] * position[1]
                 + rotation[i][2] * position[2]);
         }
-        Some(Camera {
-            fx: k.fx as f32,
-            fy: k.fy as f32,
-            cx: k.cx as f32,
-            cy: k.cy as f32,
-            width: k.width,
-            height: k.height,
-            rotation,
-            translation,
-        })
+        Some(Camera::with_pose(k, rotation, translation))
     }
 
     pub(crate) fn check(&self, index: usize) -> Result<(), SplatError> {

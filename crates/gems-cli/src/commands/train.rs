@@ -5,37 +5,10 @@
 
 use std::path::PathBuf;
 
+use gems_pipeline::Init;
 use gems_train::TrainConfig;
 
 use super::edi::LinearisationArg;
-
-/// Initialisation of poses and points (`--init`; gems-pipeline's `Init`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Init {
-    /// The scene's COLMAP sparse model (or the one given with --colmap-model).
-    Colmap,
-    /// Ground-truth poses.
-    Gt,
-    /// Ground-truth poses perturbed by seeded noise (labelled as such in the outputs).
-    GtNoisy,
-    /// Built-in blur-robust SfM on the scene's images (written to `<output>/sfm`).
-    Sfm,
-    /// A user-installed COLMAP (feature extractor, exhaustive matcher, mapper) run as a
-    /// subprocess on the scene's images; its largest model is imported (`<output>/colmap`).
-    ColmapCli,
-}
-
-impl From<Init> for gems_pipeline::Init {
-    fn from(init: Init) -> Self {
-        match init {
-            Init::Colmap => Self::Colmap,
-            Init::Gt => Self::Gt,
-            Init::GtNoisy => Self::GtNoisy,
-            Init::Sfm => Self::Sfm,
-            Init::ColmapCli => Self::ColmapCli,
-        }
-    }
-}
 
 /// Arguments of `gems train`.
 #[derive(clap::Args)]
@@ -145,7 +118,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..Default::default()
     };
     let init = gems_pipeline::InitRequest {
-        init: args.init.into(),
+        init: args.init,
         colmap_model: args.colmap_model,
         noise_translation: args.noise_translation,
         noise_rotation: args.noise_rotation,

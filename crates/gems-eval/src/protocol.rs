@@ -11,7 +11,7 @@ use gems_train::engine::Engine;
 use gems_train::io::TrainOutput;
 
 use crate::EvalError;
-use crate::evaluate::{
+use crate::metrics::{
     EvalView, MetricsReport, PoseMode, SplitResult, SplitScores, ape_of_centres,
     evaluate_views_with_progress, score_image,
 };
