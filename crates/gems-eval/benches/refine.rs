@@ -6,7 +6,7 @@ fn main() {
 #[divan::bench(sample_count = 3)]
 fn refine_100_steps_128x96_2k_gaussians(bencher: divan::Bencher) {
     let (g, k, c2w) = gems_eval_bench_scene();
-    let mut renderer = gems_train::engine::Engine::cpu();
+    let mut renderer = gems_gpu::Engine::cpu();
     let gt = gems_eval::refine::render(&mut renderer, &g, &c2w, &k).unwrap();
     let start = c2w
         * gems_math::Se3::exp(&gems_math::Vector6::from([

@@ -71,6 +71,9 @@ pub enum EvalError {
     Data(#[from] gems_data::DataError),
     #[error(transparent)]
     Splat(#[from] gems_splat::SplatError),
+    /// The splatting engine (CPU or GPU) failed.
+    #[error(transparent)]
+    Engine(#[from] gems_gpu::GpuError),
     #[error(transparent)]
     Metrics(#[from] gems_metrics::MetricsError),
     #[error(transparent)]

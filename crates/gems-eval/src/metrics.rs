@@ -1,9 +1,9 @@
 //! Per-image metrics, split summaries, APE and the metrics.json document.
 
+use gems_gpu::Engine;
 use gems_math::{Alignment, Intrinsics, Se3, ape_translation};
 use gems_metrics::Lpips;
 use gems_splat::{Camera, Gaussians, RenderSettings};
-use gems_train::engine::Engine;
 use serde::{Deserialize, Serialize};
 
 use crate::EvalError;

@@ -4,10 +4,10 @@
 use std::path::Path;
 
 use gems_data::{OpenOptions, Scene, Split, load_image, open_scene};
+use gems_gpu::Engine;
 use gems_math::{Intrinsics, Se3};
 use gems_metrics::Lpips;
 use gems_splat::Camera;
-use gems_train::engine::Engine;
 use gems_train::io::TrainOutput;
 
 use crate::EvalError;

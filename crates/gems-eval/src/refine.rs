@@ -9,9 +9,9 @@
 //! one after the last update (PRISM3D logs its metrics at step 80 of 100, an artefact of its
 //! logging interval that we do not copy).
 
+use gems_gpu::Engine;
 use gems_math::{Intrinsics, Se3, Vector6, c2w_right_perturbation_gradient, se3_right_jacobian};
 use gems_splat::{Camera, Gaussians, RenderSettings};
-use gems_train::engine::Engine;
 
 use crate::EvalError;
 

@@ -13,7 +13,7 @@ use gems_train::normalize::Normalization;
 fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
     let g = common::scene(60, -2.6, 0.5);
     let k = common::intrinsics();
-    let mut r = gems_train::engine::Engine::cpu();
+    let mut r = gems_gpu::Engine::cpu();
     let mut views = Vec::new();
     let mut data = EvalData::default();
     for i in 0..5 {

@@ -5,7 +5,7 @@ mod common;
 
 use gems_eval::refine::{pose_loss_and_grad, render};
 use gems_eval::{PoseRefineConfig, refine_pose};
-use gems_train::engine::Engine;
+use gems_gpu::Engine;
 
 #[test]
 fn pose_gradient_matches_finite_differences() {

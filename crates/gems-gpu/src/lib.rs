@@ -53,6 +53,7 @@
 mod adam;
 pub mod buffers;
 mod context;
+mod engine;
 mod kernels;
 mod loss;
 mod mcmc;
@@ -64,6 +65,7 @@ mod step;
 
 pub use adam::{AdamConfig, AdamGroupStep, GaussianLrs, GpuAdam};
 pub use context::{AdapterSummary, DeviceChoice, GpuContext, select};
+pub use engine::Engine;
 pub use loss::{BlurLoss, LossScalars};
 pub use mcmc::{GpuMcmc, N_MAX, NoiseParams};
 pub use params::{GpuGaussians, GpuGradients, Group, GroupMoments};

@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use gems_eval::MetricsReport;
+use gems_gpu::Engine;
 use gems_train::TrainConfig;
-use gems_train::engine::Engine;
 use gems_train::io::{TrainOutput, has_checkpoint, load_checkpoint, save_checkpoint};
 use gems_train::prepare::{InitMode, prepare_input};
 use gems_train::trainer::Trainer;

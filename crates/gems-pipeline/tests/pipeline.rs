@@ -1,9 +1,9 @@
 //! The whole pipeline through the library API on a tiny generated scene: what a library user
 //! (a benchmark, another program) calls instead of the `gems` command line.
 
+use gems_gpu::Engine;
 use gems_pipeline::{Init, InitRequest, PipelineError, TrainRequest, train_scene};
 use gems_train::TrainConfig;
-use gems_train::engine::Engine;
 
 fn request(scene: &std::path::Path, output: &std::path::Path, init: InitRequest) -> TrainRequest {
     TrainRequest {

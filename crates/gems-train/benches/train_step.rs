@@ -9,11 +9,11 @@
 //! timed window.
 
 use gems_gpu::DeviceChoice;
+use gems_gpu::Engine;
 use gems_math::Intrinsics;
 use gems_math::{Se3, Vector6};
 use gems_splat::{Camera, Gaussians, RenderSettings, Renderer};
 use gems_train::TrainConfig;
-use gems_train::engine::Engine;
 use gems_train::normalize::Normalization;
 use gems_train::trainer::{TrainInput, TrainView, Trainer};
 use rand::{RngExt, SeedableRng};

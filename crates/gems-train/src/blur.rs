@@ -9,6 +9,7 @@
 //! gradient w.r.t. the right perturbation of c2w_k (= of Δ(u_k), since c2w₀ is a constant left
 //! factor), and each knot j receives Σ_k J_jkᵀ · g_k.
 
+use gems_gpu::Engine;
 use gems_math::{Intrinsics, Se3, Trajectory, c2w_right_perturbation_gradient};
 use gems_splat::{Camera, Gaussians, Gradients};
 
@@ -44,8 +45,8 @@ pub trait Rasterizer {
     ) -> Result<Gradients, TrainError>;
 }
 
-/// Both engines through [`crate::engine::Engine`], which dispatches to the one a run chose.
-impl Rasterizer for crate::engine::Engine {
+/// Both engines through [`Engine`], which dispatches to the one a run chose.
+impl Rasterizer for Engine {
     fn render(
         &mut self,
         g: &Gaussians,
@@ -64,7 +65,7 @@ impl Rasterizer for crate::engine::Engine {
         bgs: &[[f32; 3]],
         d_rgb: &[f32],
     ) -> Result<Gradients, TrainError> {
-        self.backward(g, cams, bgs, d_rgb, None)
+        Ok(self.backward(g, cams, bgs, d_rgb, None)?)
     }
 }
 

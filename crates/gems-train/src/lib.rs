@@ -8,7 +8,6 @@
 //! * [`normalize`] — PRISM3D scene normalisation (orient up, centre, scale) and its inverse.
 //! * [`blur`] — the blur model: n virtual cameras in one render call, mean, and the gradient
 //!   chain to Gaussians and trajectory knots.
-//! * [`engine`] — [`engine::Engine`]: the CPU or GPU splatting engine (`--device`).
 //! * [`trainer`] — [`trainer::Trainer`]: the joint optimisation loop and its checkpointable state
 //!   (on the GPU engine the Gaussians stay resident on the GPU; `Trainer::sync` downloads them,
 //!   and `Trainer::run` syncs at checkpoint steps and at the end).
@@ -32,7 +31,6 @@
 pub mod adam;
 pub mod blur;
 pub mod config;
-pub mod engine;
 pub mod init;
 pub mod io;
 pub mod mcmc;

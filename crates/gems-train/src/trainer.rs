@@ -41,12 +41,12 @@ use crate::blur::{
     render_blurred, virtual_cameras,
 };
 use crate::config::TrainConfig;
-use crate::engine::Engine;
 use crate::mcmc::{
     BinomialTable, GaussianAdam, add_new, growth_draws, inject_noise, relocate_dead,
     relocation_draws,
 };
 use crate::normalize::Normalization;
+use gems_gpu::Engine;
 
 /// One blurry training image, in the normalised frame.
 #[derive(Clone, Debug)]

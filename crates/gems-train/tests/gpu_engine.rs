@@ -8,8 +8,8 @@
 mod common;
 
 use gems_gpu::DeviceChoice;
+use gems_gpu::Engine;
 use gems_train::TrainConfig;
-use gems_train::engine::Engine;
 use gems_train::io::{load_checkpoint, save_checkpoint};
 use gems_train::normalize::Normalization;
 use gems_train::trainer::{TrainInput, Trainer, psnr};

@@ -15,7 +15,7 @@ pub mod train;
 
 use anyhow::Context;
 use gems_gpu::DeviceChoice;
-use gems_train::engine::Engine;
+use gems_gpu::Engine;
 
 /// The splatting engine for `--device`, announced on stdout; `--device gpu` without an
 /// adapter is an error.

@@ -5,14 +5,12 @@
 //! tests), so a run may switch engines between a checkpoint and its `--resume`. Renders of the
 //! two engines differ by float rounding only; each engine alone is deterministic (the GPU one
 //! on a given adapter and driver: it adds no floats atomically). With the GPU engine the
-//! trainer keeps the training step resident on the GPU (`gems_gpu::ResidentStep`, see
-//! [`crate::trainer`]); the [`crate::blur::Rasterizer`] calls here serve evaluation and the
-//! CPU engine's step.
+//! trainer (gems-train) keeps the training step resident on the GPU ([`crate::ResidentStep`]);
+//! the calls here serve evaluation and the CPU engine's training step.
 
-use gems_gpu::{DeviceChoice, GpuRenderer};
 use gems_splat::{Camera, Gaussians, Gradients, RenderOutput, RenderSettings, Renderer};
 
-use crate::TrainError;
+use crate::{DeviceChoice, GpuError, GpuRenderer};
 
 /// A splatting engine (both boxed: the CPU engine's buffers are kept inline).
 pub enum Engine {
@@ -40,8 +38,8 @@ impl Engine {
 
     /// The engine for `--device`: `auto` takes a hardware GPU when there is one and the CPU
     /// otherwise; `gpu` with no adapter is an error.
-    pub fn select(choice: DeviceChoice) -> Result<Self, TrainError> {
-        Ok(match gems_gpu::select(choice)? {
+    pub fn select(choice: DeviceChoice) -> Result<Self, GpuError> {
+        Ok(match crate::select(choice)? {
             Some(ctx) => Engine::Gpu(Box::new(GpuRenderer::new(&ctx))),
             None => Engine::cpu(),
         })
@@ -62,7 +60,7 @@ impl Engine {
         cams: &[Camera],
         bgs: &[[f32; 3]],
         s: &RenderSettings,
-    ) -> Result<RenderOutput, TrainError> {
+    ) -> Result<RenderOutput, GpuError> {
         Ok(match self {
             Engine::Cpu(r) => r.forward(g, cams, bgs, s)?,
             Engine::Gpu(r) => r.forward(g, cams, bgs, s)?,
@@ -77,7 +75,7 @@ impl Engine {
         bgs: &[[f32; 3]],
         d_rgb: &[f32],
         d_alpha: Option<&[f32]>,
-    ) -> Result<Gradients, TrainError> {
+    ) -> Result<Gradients, GpuError> {
         Ok(match self {
             Engine::Cpu(r) => r.backward(g, cams, bgs, d_rgb, d_alpha)?,
             Engine::Gpu(r) => r.backward(g, cams, bgs, d_rgb, d_alpha)?,
