@@ -321,7 +321,7 @@ fn deblur_nerf_real_trains_read_only_with_colmap_at_downscale_4() {
         ],
     ));
     assert!(out.join("point_cloud.ply").is_file());
-    let trained = gems_train::io::TrainOutput::load(&out).unwrap();
+    let trained = gems_train::TrainOutput::load(&out).unwrap();
     let k = &trained.views[0].intrinsics;
     assert_eq!((k.width, k.height), (48, 32), "trained on images_4/");
     assert_eq!(trained.views[0].name, "001.jpg");

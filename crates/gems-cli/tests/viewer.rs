@@ -54,7 +54,7 @@ fn trained_scene_viewer_and_exports() {
     let page = out.join("viewer.html");
     assert!(page.is_file());
 
-    let trained = gems_train::io::TrainOutput::load(&out).unwrap();
+    let trained = gems_train::TrainOutput::load(&out).unwrap();
     // Headless Chromium windows are at least 500 px wide: a window k times the image, where the
     // viewer scales the camera's intrinsics by k, compared with gems' render of that camera.
     let mut renderer = Renderer::new();

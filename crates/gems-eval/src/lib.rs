@@ -5,7 +5,7 @@
 //!   test-time pose refinement ([`refine::refine_pose`]: one SE(3) correction per view, 100 Adam
 //!   steps, lr 1e-3, L1 vs the ground truth), and score them ([`score_image`]: PSNR, SSIM
 //!   (torchmetrics), LPIPS-Alex when weights are given — otherwise `None`, never a number).
-//! - [`evaluate_output`]: the whole protocol on a trained [`gems_train::io::TrainOutput`]
+//! - [`evaluate_output`]: the whole protocol on a trained [`gems_train::TrainOutput`]
 //!   (ground truth from the scene folder via [`eval_data_from_scene`]):
 //!   `input` (the blurry training images vs sharp GT: where the user started), `deblur`
 //!   (training views at their trajectory midpoint vs sharp GT), `deblur_refined` (training views

@@ -8,7 +8,7 @@ use gems_gpu::Engine;
 use gems_math::{Intrinsics, Se3};
 use gems_metrics::Lpips;
 use gems_splat::Camera;
-use gems_train::io::TrainOutput;
+use gems_train::TrainOutput;
 
 use crate::EvalError;
 use crate::metrics::{

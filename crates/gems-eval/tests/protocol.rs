@@ -7,8 +7,8 @@ use gems_eval::tum::read_tum;
 use gems_eval::*;
 use gems_math::Pose;
 use gems_math::Se3;
-use gems_train::io::{TrainOutput, ViewResult};
-use gems_train::normalize::Normalization;
+use gems_train::Normalization;
+use gems_train::{TrainOutput, ViewResult};
 
 fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
     let g = common::scene(60, -2.6, 0.5);
@@ -54,7 +54,7 @@ fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
         init_label: "gt-noisy (test)".into(),
         gaussians: g,
         views,
-        history: gems_train::trainer::History {
+        history: gems_train::History {
             loss: (0..50).map(|i| 0.5 / (1.0 + i as f32)).collect(),
             psnr: (0..50).map(|i| 15.0 + 0.2 * i as f32).collect(),
             gaussians: vec![60; 50],

@@ -7,8 +7,8 @@ use gems_data::Split;
 use gems_eval::*;
 use gems_math::Pose;
 use gems_math::Se3;
-use gems_train::io::{TrainOutput, ViewResult};
-use gems_train::normalize::Normalization;
+use gems_train::Normalization;
+use gems_train::{TrainOutput, ViewResult};
 
 fn trained_on(scene: &gems_data::Scene, factor: u32, cfg_fov: f64) -> TrainOutput {
     let views = scene

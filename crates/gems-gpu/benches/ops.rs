@@ -11,10 +11,9 @@ use gems_gpu::{
     NoiseParams, buffers,
 };
 use gems_splat::Gaussians;
-use gems_train::adam::AdamHyper;
+use gems_train::adam::{AdamHyper, GaussianAdam};
 use gems_train::mcmc::{
-    BinomialTable, GaussianAdam, add_new, growth_draws, inject_noise, relocate_dead,
-    relocation_draws,
+    BinomialTable, add_new, growth_draws, inject_noise, relocate_dead, relocation_draws,
 };
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;

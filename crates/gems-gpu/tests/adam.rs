@@ -7,8 +7,8 @@ use common::{ctx, gaussians, max_ulps, values};
 use gems_gpu::{
     AdamConfig, AdamGroupStep, GaussianLrs, GpuAdam, GpuGaussians, GpuGradients, Group, buffers,
 };
+use gems_train::adam::GaussianAdam;
 use gems_train::adam::{AdamHyper, AdamState};
-use gems_train::mcmc::GaussianAdam;
 
 const LRS: GaussianLrs = GaussianLrs {
     means: 1.6e-4 * 3.7,

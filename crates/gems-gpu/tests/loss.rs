@@ -41,7 +41,7 @@ struct CpuOut {
 
 fn run_cpu(h: usize, w: usize, n: usize, lambda: f32, renders: &[f32], target: &[f32]) -> CpuOut {
     let len = h * w * 3;
-    // gems_train::blur::render_blurred: b += v · (1/n), view by view.
+    // gems_train::render_blurred: b += v · (1/n), view by view.
     let inv_n = 1.0 / n as f32;
     let mut blurred = vec![0.0f32; len];
     for view in renders.chunks_exact(len) {
@@ -54,12 +54,12 @@ fn run_cpu(h: usize, w: usize, n: usize, lambda: f32, renders: &[f32], target: &
         .unwrap()
         .compute(&blurred, target, &mut d_blurred)
         .unwrap();
-    // gems_train::blur::backward_blurred: d_rgb_k = d_blurred · (1/n).
+    // gems_train::backward_blurred: d_rgb_k = d_blurred · (1/n).
     let d_renders = (0..n)
         .flat_map(|_| d_blurred.iter().map(|d| d * inv_n))
         .collect();
     CpuOut {
-        psnr: gems_train::trainer::psnr(&blurred, target),
+        psnr: gems_train::psnr(&blurred, target),
         blurred,
         d_blurred,
         d_renders,

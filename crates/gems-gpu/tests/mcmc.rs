@@ -8,9 +8,9 @@ use common::{ctx, gaussians};
 use gems_gpu::rng::{NOISE_STREAM, counter_of, key_of, normal3, philox4x32_10};
 use gems_gpu::{GpuGaussians, GpuMcmc, Group, GroupMoments, NoiseParams, buffers};
 use gems_splat::Gaussians;
+use gems_train::adam::GaussianAdam;
 use gems_train::mcmc::{
-    BinomialTable, GaussianAdam, add_new, apply_noise, growth_draws, relocate_dead,
-    relocation_draws,
+    BinomialTable, add_new, apply_noise, growth_draws, relocate_dead, relocation_draws,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -15,7 +15,7 @@ use gems_gpu::{
 };
 use gems_splat::{RenderSettings, Renderer};
 use gems_train::adam::AdamHyper;
-use gems_train::mcmc::GaussianAdam;
+use gems_train::adam::GaussianAdam;
 
 #[test]
 fn gpu_step_matches_the_cpu_chain() {

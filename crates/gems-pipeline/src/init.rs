@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use gems_init::edi::Linearisation;
-use gems_train::prepare::InitMode;
+use gems_train::InitMode;
 
 use crate::PipelineError;
 

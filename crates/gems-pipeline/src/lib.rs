@@ -23,6 +23,6 @@ mod init;
 mod run;
 
 pub use error::PipelineError;
-pub use gems_train::prepare::InitMode;
+pub use gems_train::InitMode;
 pub use init::{EventInit, Init, InitRequest, edi_images, resolve_init, run_colmap, run_sfm};
 pub use run::{RunOutcome, TrainJob, TrainRequest, attach_edi, train_and_report, train_scene};

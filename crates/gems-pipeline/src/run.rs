@@ -7,9 +7,9 @@ use std::time::Instant;
 use gems_eval::MetricsReport;
 use gems_gpu::Engine;
 use gems_train::TrainConfig;
-use gems_train::io::{TrainOutput, has_checkpoint, load_checkpoint, save_checkpoint};
-use gems_train::prepare::{InitMode, prepare_input};
-use gems_train::trainer::Trainer;
+use gems_train::Trainer;
+use gems_train::{InitMode, prepare_input};
+use gems_train::{TrainOutput, has_checkpoint, load_checkpoint, save_checkpoint};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::PipelineError;
@@ -159,17 +159,17 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
         Trainer::new(job.cfg, input)?
     };
     trainer.set_engine(job.engine);
-    gems_train::io::write_atomic(
+    gems_train::write_atomic(
         &job.output.join("config.toml"),
-        trainer.cfg.to_toml().as_bytes(),
+        trainer.config().to_toml().as_bytes(),
     )?;
 
     let bar = progress_bar(
         job.progress,
-        trainer.cfg.steps,
+        trainer.config().steps,
         "{bar:30} {pos}/{len} steps  {msg}  {per_sec}  ETA {eta}",
     );
-    bar.set_position(trainer.state.step as u64);
+    bar.set_position(trainer.steps_done() as u64);
     let start = Instant::now();
     let out_dir = job.output.to_path_buf();
     trainer.run(|t, r| {
@@ -178,8 +178,8 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
             "loss {:.4}  PSNR {:.2}  Gaussians {}",
             r.loss, r.psnr, r.gaussians
         ));
-        let every = t.cfg.checkpoint_every;
-        if every > 0 && r.step % every == 0 && r.step < t.cfg.steps {
+        let every = t.config().checkpoint_every;
+        if every > 0 && r.step % every == 0 && r.step < t.config().steps {
             save_checkpoint(&out_dir, t)?;
         }
         Ok(())

@@ -13,9 +13,9 @@ use gems_gpu::Engine;
 use gems_math::Intrinsics;
 use gems_math::{Se3, Vector6};
 use gems_splat::{Camera, Gaussians, RenderSettings, Renderer};
+use gems_train::Normalization;
 use gems_train::TrainConfig;
-use gems_train::normalize::Normalization;
-use gems_train::trainer::{TrainInput, TrainView, Trainer};
+use gems_train::{TrainInput, TrainState, TrainView, Trainer};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -90,10 +90,21 @@ fn trainer() -> Trainer {
         scene_scale: 1.0,
         init_label: "bench".into(),
     };
-    let mut t = Trainer::new(cfg, input).unwrap();
+    let mut fresh = Trainer::new(cfg.clone(), input).unwrap();
     // Start past the SH ramp (all 16 coefficients active, as in most of a run), off a refine step.
-    t.state.step = 3001;
-    t
+    let state = TrainState {
+        step: 3001,
+        ..fresh.state().unwrap().clone()
+    };
+    Trainer::from_state(
+        cfg,
+        fresh.views().to_vec(),
+        Normalization::identity(),
+        1.0,
+        "bench".into(),
+        state,
+    )
+    .unwrap()
 }
 
 #[divan::bench(sample_count = 3, sample_size = 1)]

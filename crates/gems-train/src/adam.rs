@@ -126,6 +126,51 @@ impl AdamState {
     }
 }
 
+/// Adam moments of the Gaussian parameter groups, row-aligned with `Gaussians`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GaussianAdam {
+    pub means: AdamState,
+    pub quats: AdamState,
+    pub log_scales: AdamState,
+    pub opacity_logits: AdamState,
+    /// All 16×3 SH coefficients; the dc columns (0..3) use the dc lr, the rest the rest lr.
+    pub sh: AdamState,
+}
+
+impl GaussianAdam {
+    pub fn new(n: usize) -> Self {
+        Self {
+            means: AdamState::new(n, 3),
+            quats: AdamState::new(n, 4),
+            log_scales: AdamState::new(n, 3),
+            opacity_logits: AdamState::new(n, 1),
+            sh: AdamState::new(n, 48),
+        }
+    }
+
+    pub(crate) fn groups(&mut self) -> [&mut AdamState; 5] {
+        [
+            &mut self.means,
+            &mut self.quats,
+            &mut self.log_scales,
+            &mut self.opacity_logits,
+            &mut self.sh,
+        ]
+    }
+
+    pub fn reset_rows(&mut self, rows: &[usize]) {
+        for g in self.groups() {
+            g.reset_rows(rows);
+        }
+    }
+
+    pub fn append_zero_rows(&mut self, n: usize) {
+        for g in self.groups() {
+            g.append_zero_rows(n);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -16,8 +16,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
 use crate::adam::AdamState;
+use crate::adam::GaussianAdam;
 use crate::config::TrainConfig;
-use crate::mcmc::GaussianAdam;
 use crate::normalize::Normalization;
 use crate::trainer::{History, TrainState, TrainView, Trainer};
 

@@ -1,44 +1,61 @@
 //! GeMS training: per-image exposure trajectories, the physical blur model, losses, Adam and
 //! 3DGS-MCMC densification, jointly optimised.
 //!
-//! Modules:
-//! * [`config`] — [`TrainConfig`]: every constant of the method (TOML, defaults = paper/PRISM3D).
-//! * [`adam`] — torch-semantics Adam on flat SoA parameter groups.
-//! * [`mcmc`] — gsplat `MCMCStrategy`: relocation, growth, SGLD noise.
-//! * [`normalize`] — PRISM3D scene normalisation (orient up, centre, scale) and its inverse.
-//! * [`blur`] — the blur model: n virtual cameras in one render call, mean, and the gradient
-//!   chain to Gaussians and trajectory knots.
-//! * [`trainer`] — [`trainer::Trainer`]: the joint optimisation loop and its checkpointable state
-//!   (on the GPU engine the Gaussians stay resident on the GPU; `Trainer::sync` downloads them,
-//!   and `Trainer::run` syncs at checkpoint steps and at the end).
-//! * [`io`] — atomic files, checkpoints (safetensors + JSON) and [`io::TrainOutput`], the
+//! The crate root is the API; the modules behind it are private except [`adam`] and [`mcmc`],
+//! the CPU reference that gems-gpu's optimiser kernels are tested against.
+//! * [`TrainConfig`]: every constant of the method (TOML, defaults = paper/PRISM3D).
+//! * The blur model ([`render_blurred`], [`backward_blurred`] over an [`Exposure`]): n virtual
+//!   cameras in one render call, their mean, and the gradient chain to Gaussians and knots.
+//! * [`Trainer`]: the joint optimisation loop and its checkpointable [`TrainState`] (on the GPU
+//!   engine the Gaussians stay resident on the GPU; `Trainer::sync` downloads them, and
+//!   `Trainer::run` syncs at checkpoint steps and at the end).
+//! * [`save_checkpoint`] / [`load_checkpoint`] (safetensors + JSON) and [`TrainOutput`], the
 //!   trained result that gems-eval consumes.
-//! * [`prepare`] — scene folder + init mode (colmap / gt / gt-noisy) → [`trainer::TrainInput`].
-//! * [`init`] — Gaussians from SfM points (3-NN scales) or random points in the camera frustums.
+//! * [`prepare_input`]: scene folder + [`InitMode`] (colmap / gt / gt-noisy) → [`TrainInput`],
+//!   with Gaussians from SfM points ([`from_points`], 3-NN scales) or random points in the
+//!   camera frustums, and the PRISM3D scene [`Normalization`].
 //!
 //! Typical use (what `gems train` does):
 //! ```ignore
-//! let input = prepare::prepare_input(&scene, &prepare::InitMode::Gt, &cfg)?;
-//! let mut trainer = trainer::Trainer::new(cfg, input)?;
-//! trainer.run(|t, report| { /* progress; io::save_checkpoint(dir, t) periodically */ Ok(()) })?;
-//! let output = io::TrainOutput::from_trainer(&trainer);
+//! let input = gems_train::prepare_input(&scene, &InitMode::Gt, &cfg)?;
+//! let mut trainer = Trainer::new(cfg, input)?;
+//! trainer.run(|t, report| { /* progress; save_checkpoint(dir, t) periodically */ Ok(()) })?;
+//! let output = TrainOutput::from_trainer(&trainer);
 //! output.save(dir)?; // model.safetensors + model.json, read back with TrainOutput::load
 //! let ply_gaussians = output.normalization.gaussians_to_input_frame(&output.gaussians);
 //! ```
-//! Resume: `io::load_checkpoint(dir)` → `Trainer::from_state(cfg, views, …, state)` continues
+//! Resume: `load_checkpoint(dir)` → `Trainer::from_state(cfg, views, …, state)` continues
 //! bit-identically (same seed → same result; results do not depend on the thread count; on the
 //! GPU engine, on the same adapter and driver).
+// The CPU reference of gems-gpu's optimiser kernels (tested against it), hence public.
 pub mod adam;
-pub mod blur;
-pub mod config;
-pub mod init;
-pub mod io;
+mod blur;
+mod config;
+mod init;
+mod io;
 pub mod mcmc;
-pub mod normalize;
-pub mod prepare;
-pub mod trainer;
+mod normalize;
+mod prepare;
+mod trainer;
 
-pub use config::TrainConfig;
+pub use blur::{
+    BlurWorkspace, Exposure, Rasterizer, accumulate_knot_gradients, backward_blurred,
+    render_blurred, virtual_c2w, virtual_cameras,
+};
+pub use config::{
+    InitConfig, LearningRates, McmcConfig, NormalizeConfig, PoseConfig, REFERENCE_STEPS, TopUp,
+    TrainConfig,
+};
+pub use init::{PointCloud, from_points, random_in_frustums};
+pub use io::{
+    CHECKPOINT_JSON, CHECKPOINT_TENSORS, MODEL_JSON, MODEL_TENSORS, TrainOutput, ViewResult,
+    has_checkpoint, load_checkpoint, save_checkpoint, write_atomic,
+};
+pub use normalize::Normalization;
+pub use prepare::{InitMode, prepare_input};
+pub use trainer::{
+    History, StepReport, TrainInput, TrainState, TrainView, Trainer, psnr, trajectory_of,
+};
 
 use std::path::{Path, PathBuf};
 

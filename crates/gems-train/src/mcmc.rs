@@ -20,7 +20,7 @@ use rand::Rng;
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::adam::AdamState;
+use crate::adam::GaussianAdam;
 
 /// Largest split count represented in the binomial table (gsplat: n_max = 51).
 pub const N_MAX: usize = 51;
@@ -103,51 +103,6 @@ fn sigmoid(x: f32) -> f32 {
 
 fn logit(p: f32) -> f32 {
     (p / (1.0 - p)).ln()
-}
-
-/// Adam moments of the Gaussian parameter groups, row-aligned with `Gaussians`.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct GaussianAdam {
-    pub means: AdamState,
-    pub quats: AdamState,
-    pub log_scales: AdamState,
-    pub opacity_logits: AdamState,
-    /// All 16×3 SH coefficients; the dc columns (0..3) use the dc lr, the rest the rest lr.
-    pub sh: AdamState,
-}
-
-impl GaussianAdam {
-    pub fn new(n: usize) -> Self {
-        Self {
-            means: AdamState::new(n, 3),
-            quats: AdamState::new(n, 4),
-            log_scales: AdamState::new(n, 3),
-            opacity_logits: AdamState::new(n, 1),
-            sh: AdamState::new(n, 48),
-        }
-    }
-
-    fn groups(&mut self) -> [&mut AdamState; 5] {
-        [
-            &mut self.means,
-            &mut self.quats,
-            &mut self.log_scales,
-            &mut self.opacity_logits,
-            &mut self.sh,
-        ]
-    }
-
-    pub fn reset_rows(&mut self, rows: &[usize]) {
-        for g in self.groups() {
-            g.reset_rows(rows);
-        }
-    }
-
-    pub fn append_zero_rows(&mut self, n: usize) {
-        for g in self.groups() {
-            g.append_zero_rows(n);
-        }
-    }
 }
 
 /// Splits each distinct source into (count + 1) copies in place: new o' and s' written to the

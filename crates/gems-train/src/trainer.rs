@@ -35,6 +35,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
+use crate::adam::GaussianAdam;
 use crate::adam::{AdamHyper, AdamState};
 use crate::blur::{
     BlurWorkspace, Exposure, Rasterizer, accumulate_knot_gradients, backward_blurred,
@@ -42,8 +43,7 @@ use crate::blur::{
 };
 use crate::config::TrainConfig;
 use crate::mcmc::{
-    BinomialTable, GaussianAdam, add_new, growth_draws, inject_noise, relocate_dead,
-    relocation_draws,
+    BinomialTable, add_new, growth_draws, inject_noise, relocate_dead, relocation_draws,
 };
 use crate::normalize::Normalization;
 use gems_gpu::Engine;
@@ -152,15 +152,15 @@ struct Resident {
 
 /// The trainer: configuration, data and state, plus reusable buffers.
 pub struct Trainer {
-    pub cfg: TrainConfig,
-    pub views: Vec<TrainView>,
-    pub normalization: Normalization,
-    pub scene_scale: f32,
-    pub init_label: String,
+    pub(crate) cfg: TrainConfig,
+    pub(crate) views: Vec<TrainView>,
+    pub(crate) normalization: Normalization,
+    pub(crate) scene_scale: f32,
+    pub(crate) init_label: String,
     /// Everything a checkpoint holds. On the GPU engine `gaussians` and `adam` are a host copy
     /// of the resident values as of the last [`Trainer::sync`] (module docs); the other fields
     /// are always current.
-    pub state: TrainState,
+    pub(crate) state: TrainState,
     renderer: Engine,
     resident: Option<Resident>,
     rng: ChaCha8Rng,
@@ -173,6 +173,21 @@ pub struct Trainer {
 }
 
 impl Trainer {
+    /// The run's configuration.
+    pub fn config(&self) -> &TrainConfig {
+        &self.cfg
+    }
+
+    /// The training views, in the normalised frame.
+    pub fn views(&self) -> &[TrainView] {
+        &self.views
+    }
+
+    /// Steps taken so far.
+    pub fn steps_done(&self) -> usize {
+        self.state.step
+    }
+
     /// A fresh run: knots ~ N(0, knot_init_std²) from the seeded generator.
     pub fn new(cfg: TrainConfig, input: TrainInput) -> Result<Self, TrainError> {
         cfg.validate().map_err(TrainError::Config)?;

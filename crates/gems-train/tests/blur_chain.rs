@@ -8,7 +8,7 @@ mod common;
 use gems_math::{Trajectory, TrajectoryKind};
 use gems_splat::Camera;
 use gems_splat::reference;
-use gems_train::blur::{BlurWorkspace, Exposure, backward_blurred, render_blurred};
+use gems_train::{BlurWorkspace, Exposure, backward_blurred, render_blurred};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

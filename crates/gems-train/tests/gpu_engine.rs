@@ -9,10 +9,10 @@ mod common;
 
 use gems_gpu::DeviceChoice;
 use gems_gpu::Engine;
+use gems_train::Normalization;
 use gems_train::TrainConfig;
-use gems_train::io::{load_checkpoint, save_checkpoint};
-use gems_train::normalize::Normalization;
-use gems_train::trainer::{TrainInput, Trainer, psnr};
+use gems_train::{TrainInput, Trainer, psnr};
+use gems_train::{load_checkpoint, save_checkpoint};
 
 /// 60 steps with refinement (relocation + growth) at steps 6, 26 and 46.
 fn config(seed: u64) -> TrainConfig {
@@ -60,19 +60,19 @@ fn gpu() -> Engine {
 /// Mean PSNR of each view's synthesised blurry image (rendered on the CPU) against its input.
 fn fit_psnr(t: &mut Trainer) -> f32 {
     t.set_engine(Engine::cpu());
-    let n = t.views.len();
+    let n = t.views().len();
     let mut sum = 0.0;
     for v in 0..n {
-        let k = t.views[v].intrinsics;
+        let k = t.views()[v].intrinsics;
         let poses = t.virtual_poses(v);
-        let mut blurred = vec![0.0f32; t.views[v].image.len()];
+        let mut blurred = vec![0.0f32; t.views()[v].image.len()];
         for p in &poses {
             let img = t.render_view(p, &k).unwrap();
             for (b, x) in blurred.iter_mut().zip(img) {
                 *b += x / poses.len() as f32;
             }
         }
-        sum += psnr(&blurred, &t.views[v].image);
+        sum += psnr(&blurred, &t.views()[v].image);
     }
     sum / n as f32
 }
@@ -93,14 +93,17 @@ fn resident_gpu_training_ends_within_0_3_db_of_cpu_training() {
         cpu.run(|_, _| Ok(())).unwrap();
         let mut gpu_run = trainer(&cfg, gpu());
         gpu_run.run(|_, _| Ok(())).unwrap();
-        assert_eq!(gpu_run.state.step, cfg.steps);
+        assert_eq!(gpu_run.state().unwrap().step, cfg.steps);
         assert!(
             gpu_run.gpu_bytes_read_back() > 0,
             "the GPU run used the resident step"
         );
         // Growth depends only on the count, relocation keeps it: the same count at every step.
-        assert_eq!(cpu.state.history.gaussians, gpu_run.state.history.gaussians);
-        let counts = &cpu.state.history.gaussians;
+        assert_eq!(
+            cpu.state().unwrap().history.gaussians,
+            gpu_run.state().unwrap().history.gaussians
+        );
+        let counts = &cpu.state().unwrap().history.gaussians;
         let grew = counts.windows(2).filter(|w| w[1] > w[0]).count();
         assert!(grew >= 2, "at least two growth steps: {counts:?}");
         let (pc, pg) = (fit_psnr(&mut cpu), fit_psnr(&mut gpu_run));
@@ -138,7 +141,7 @@ fn resident_gpu_resume_is_bit_identical() {
     );
     b.sync().unwrap();
     save_checkpoint(dir.path(), &b).unwrap();
-    let views = b.views.clone();
+    let views = b.views().to_vec();
     drop(b);
     let (cfg2, state) = load_checkpoint(dir.path()).unwrap();
     let mut c = Trainer::from_state(
@@ -174,8 +177,8 @@ fn resident_gpu_resume_is_bit_identical() {
     // And the same seed gives the same run: a second uninterrupted run equals the first.
     let mut d = trainer(&cfg, gpu());
     d.run(|_, _| Ok(())).unwrap();
-    assert_eq!(bits(&sa.gaussians), bits(&d.state.gaussians));
-    assert_eq!(sa.adam, d.state.adam);
+    assert_eq!(bits(&sa.gaussians), bits(&d.state().unwrap().gaussians));
+    assert_eq!(sa.adam, d.state().unwrap().adam);
 }
 
 /// Per step only the virtual cameras' pose gradients (48 bytes each), the loss scalars (16 +
@@ -189,7 +192,7 @@ fn resident_step_reads_back_only_pose_gradients_and_scalars() {
     let n = cfg.num_virtual_views;
     let bound = (n * 48 + 16 + 4 + n * 4) as u64;
     for _ in 0..12 {
-        let step = t.state.step;
+        let step = t.state().unwrap().step;
         let before = t.gpu_bytes_read_back();
         t.step().unwrap();
         let read = t.gpu_bytes_read_back() - before;

@@ -5,9 +5,9 @@
 use gems_data::OpenOptions;
 use gems_math::{Se3, Vector3};
 use gems_train::TrainConfig;
-use gems_train::io::TrainOutput;
-use gems_train::prepare::{InitMode, prepare_input};
-use gems_train::trainer::Trainer;
+use gems_train::TrainOutput;
+use gems_train::Trainer;
+use gems_train::{InitMode, prepare_input};
 
 #[test]
 fn synth_scene_prepares_normalises_and_trains() {

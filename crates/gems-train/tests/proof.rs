@@ -19,9 +19,9 @@ mod common;
 
 use gems_math::TrajectoryKind;
 use gems_math::{Alignment, ape_translation};
+use gems_train::Normalization;
 use gems_train::TrainConfig;
-use gems_train::normalize::Normalization;
-use gems_train::trainer::{TrainInput, Trainer, psnr};
+use gems_train::{TrainInput, Trainer, psnr};
 
 struct Outcome {
     mid_psnr: f64,
@@ -56,12 +56,12 @@ fn train(scene: &common::BlurScene, n: usize, kind: TrajectoryKind) -> Outcome {
     };
     let mut t = Trainer::new(cfg, input).unwrap();
     let centres = |t: &Trainer, mid: bool| -> Vec<[f64; 3]> {
-        (0..t.views.len())
+        (0..t.views().len())
             .map(|v| {
                 let p = if mid {
                     t.mid_pose(v)
                 } else {
-                    t.views[v].c2w_init
+                    t.views()[v].c2w_init
                 };
                 p.trans.into()
             })
@@ -78,13 +78,13 @@ fn train(scene: &common::BlurScene, n: usize, kind: TrajectoryKind) -> Outcome {
         .0
         .rmse;
     let mut total = 0.0;
-    for v in 0..t.views.len() {
-        let k = t.views[v].intrinsics;
+    for v in 0..t.views().len() {
+        let k = t.views()[v].intrinsics;
         let img = t.render_view(&t.mid_pose(v), &k).unwrap();
         total += psnr(&img, &scene.sharp[v]) as f64;
     }
     Outcome {
-        mid_psnr: total / t.views.len() as f64,
+        mid_psnr: total / t.views().len() as f64,
         ape_before,
         ape_after,
     }

@@ -29,7 +29,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let output = gems_train::io::TrainOutput::load(&args.output).with_context(|| {
+    let output = gems_train::TrainOutput::load(&args.output).with_context(|| {
         format!(
             "cannot read the trained result in {}",
             args.output.display()

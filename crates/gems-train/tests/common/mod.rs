@@ -5,7 +5,7 @@
 use gems_math::Intrinsics;
 use gems_math::{Se3, Vector3, Vector6};
 use gems_splat::{Camera, Gaussians, Gradients, RenderSettings, reference};
-use gems_train::blur::Rasterizer;
+use gems_train::Rasterizer;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -113,7 +113,7 @@ impl Rasterizer for Reference {
 
 /// A synthetic extreme-blur training set.
 pub struct BlurScene {
-    pub views: Vec<gems_train::trainer::TrainView>,
+    pub views: Vec<gems_train::TrainView>,
     /// Ground-truth sharp mid-exposure renders, `[H,W,3]` each.
     pub sharp: Vec<Vec<f32>>,
     pub gt_mid: Vec<Se3>,
@@ -194,7 +194,7 @@ pub fn blur_scene(
             let s = if i < 3 { pose_noise } else { pose_noise * 0.5 };
             s * (rng.random::<f64>() * 2.0 - 1.0)
         });
-        out.views.push(gems_train::trainer::TrainView {
+        out.views.push(gems_train::TrainView {
             name: format!("view{v:02}"),
             image: blurry,
             intrinsics: k,
@@ -226,9 +226,9 @@ pub fn init_gaussians(scene: &BlurScene, jitter: f32, seed: u64) -> Gaussians {
         .map(|s| s[0].map(|c| (c * 0.2820948 + 0.5).clamp(0.0, 1.0)))
         .collect();
     // The test cloud is sparse (one point per true Gaussian), so start from scales near the truth.
-    let cfg = gems_train::config::InitConfig {
+    let cfg = gems_train::InitConfig {
         scale_factor: 0.5,
         ..Default::default()
     };
-    gems_train::init::from_points(&pts, &cols, &cfg, 3, &mut rng).unwrap()
+    gems_train::from_points(&pts, &cols, &cfg, 3, &mut rng).unwrap()
 }
