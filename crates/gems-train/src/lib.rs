@@ -30,29 +30,32 @@
 // The CPU reference of gems-gpu's optimiser kernels (tested against it), hence public.
 pub mod adam;
 mod blur;
+mod checkpoint;
 mod config;
 mod init;
-mod io;
 pub mod mcmc;
 mod normalize;
+mod output;
 mod prepare;
+mod tensors;
 mod trainer;
 
 pub use blur::{
     BlurWorkspace, Exposure, Rasterizer, accumulate_knot_gradients, backward_blurred,
     render_blurred, virtual_c2w, virtual_cameras,
 };
+pub use checkpoint::{
+    CHECKPOINT_JSON, CHECKPOINT_TENSORS, has_checkpoint, load_checkpoint, save_checkpoint,
+};
 pub use config::{
     InitConfig, LearningRates, McmcConfig, NormalizeConfig, PoseConfig, REFERENCE_STEPS, TopUp,
     TrainConfig,
 };
 pub use init::{PointCloud, from_points, random_in_frustums};
-pub use io::{
-    CHECKPOINT_JSON, CHECKPOINT_TENSORS, MODEL_JSON, MODEL_TENSORS, TrainOutput, ViewResult,
-    has_checkpoint, load_checkpoint, save_checkpoint, write_atomic,
-};
 pub use normalize::Normalization;
+pub use output::{MODEL_JSON, MODEL_TENSORS, TrainOutput, ViewResult};
 pub use prepare::{InitMode, prepare_input};
+pub use tensors::write_atomic;
 pub use trainer::{
     History, StepReport, TrainInput, TrainState, TrainView, Trainer, psnr, trajectory_of,
 };

@@ -21,7 +21,7 @@
 //! [`Trainer::sync`]: the trainer syncs at every `checkpoint_every`-th step and at the last
 //! step (so [`Trainer::run`]'s callback sees a current state exactly when a checkpoint is due),
 //! and [`Trainer::state`], [`Trainer::render_view`] and engine changes sync first;
-//! [`crate::io::save_checkpoint`] refuses a stale copy.
+//! [`crate::save_checkpoint`] refuses a stale copy.
 
 use std::time::Instant;
 
