@@ -4,8 +4,9 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use gems_init::sfm::ba::{BaOptions, Intrinsics, Observation, bundle_adjust};
-use gems_init::sfm::{Pose, SfmOptions, run_sfm};
+use gems_init::sfm::ba::{BaOptions, Observation, Pinhole, bundle_adjust};
+use gems_init::sfm::{SfmOptions, run_sfm};
+use gems_math::{Intrinsics, Se3};
 use nalgebra::{Rotation3, Vector2, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -19,9 +20,12 @@ fn main() {
 fn bundle_adjust_20_views_2000_points(bencher: divan::Bencher) {
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let k = Intrinsics {
-        f: 200.0,
+        fx: 200.0,
+        fy: 200.0,
         cx: 120.0,
         cy: 80.0,
+        width: 240,
+        height: 160,
     };
     let pts: Vec<Vector3<f64>> = (0..2000)
         .map(|_| {
@@ -32,18 +36,18 @@ fn bundle_adjust_20_views_2000_points(bencher: divan::Bencher) {
             )
         })
         .collect();
-    let poses: Vec<Pose> = (0..20)
+    let poses: Vec<Se3> = (0..20)
         .map(|i| {
             let a = -0.3 + 0.03 * i as f64;
             let r = Rotation3::new(Vector3::new(0.0, -a, 0.0));
             let c = Vector3::new(4.0 * a.sin(), 0.0, 4.5 - 4.0 * a.cos());
-            Pose { r, t: -(r * c) }
+            Se3::new(r.into_inner(), -(r * c))
         })
         .collect();
     let mut obs = Vec::new();
     for (ci, p) in poses.iter().enumerate() {
         for (pi, x) in pts.iter().enumerate() {
-            let xy = k.project(&p.transform(x))
+            let xy = k.project(&p.act(x))
                 + Vector2::new(rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5));
             obs.push(Observation {
                 cam: ci,

@@ -118,8 +118,9 @@ fn main() {
                             .iter()
                             .zip(&gt)
                             .filter_map(|(v, g)| {
-                                v.pose
-                                    .map(|p| -> ([f64; 3], [f64; 3]) { (p.centre().into(), *g) })
+                                v.pose.map(|p| -> ([f64; 3], [f64; 3]) {
+                                    (gems_math::camera_center_from_w2c(&p).into(), *g)
+                                })
                             })
                             .unzip();
                         Outcome {

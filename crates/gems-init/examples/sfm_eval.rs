@@ -91,9 +91,9 @@ fn main() {
     let (mut est, mut g, mut rots) = (Vec::new(), Vec::new(), Vec::new());
     for (v, gp) in r.views.iter().zip(&gt) {
         if let Some(p) = v.pose {
-            est.push(<[f64; 3]>::from(p.centre()));
+            est.push(<[f64; 3]>::from(gems_math::camera_center_from_w2c(&p)));
             g.push(gp.center());
-            rots.push((p.r.into_inner(), m(&gp.rotation)));
+            rots.push((p.rot, m(&gp.rotation)));
         }
     }
     let sim = gems_math::align::umeyama(&est, &g, true).unwrap();

@@ -29,18 +29,7 @@ fn synth_levels() -> &'static std::path::Path {
 fn check_level(level: usize, tol: f64, focal_from_metadata: bool) {
     let ld = synth_levels().join(format!("s/blur_{level:02}"));
     let rows = gems_data::llff::read_poses_bounds(&ld.join("poses_bounds.npy")).unwrap();
-    let gt: Vec<gems_init::sfm::Pose> = rows
-        .iter()
-        .map(|r| {
-            let p = r.pose();
-            gems_init::sfm::Pose {
-                r: nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_row_slice(
-                    &p.rotation.concat(),
-                )),
-                t: nalgebra::Vector3::from(p.translation),
-            }
-        })
-        .collect();
+    let gt: Vec<gems_math::Se3> = rows.iter().map(|r| r.pose().into()).collect();
     let images = gems_init::sfm::load_images(&ld).unwrap();
     let opts = SfmOptions {
         focal_px: focal_from_metadata.then(|| rows[0].focal()),

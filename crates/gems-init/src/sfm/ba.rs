@@ -6,7 +6,7 @@
 //! chunks in parallel and reduced in chunk order, so the result does not depend on the number
 //! of threads.
 
-use super::geometry::Pose;
+use gems_math::{Intrinsics, Se3};
 use nalgebra::{DMatrix, DVector, Matrix2x3, Matrix3, Rotation3, SMatrix, Vector2, Vector3};
 use rayon::prelude::*;
 
@@ -18,26 +18,26 @@ pub struct Observation {
     pub xy: Vector2<f64>,
 }
 
-/// Shared pinhole intrinsics with the principal point held fixed.
-#[derive(Clone, Copy, Debug)]
-pub struct Intrinsics {
-    pub f: f64,
-    pub cx: f64,
-    pub cy: f64,
+/// Pinhole projection for the SfM. Its camera has one focal for both axes (fx = fy, which
+/// [`bundle_adjust`] refines together) and the principal point held fixed.
+pub trait Pinhole {
+    /// Camera-frame point to pixels.
+    fn project(&self, xc: &Vector3<f64>) -> Vector2<f64>;
+    /// Pixel to normalised image coordinates.
+    fn normalise(&self, p: &Vector2<f64>) -> Vector2<f64>;
 }
 
-impl Intrinsics {
+impl Pinhole for Intrinsics {
     #[inline]
-    pub fn project(&self, xc: &Vector3<f64>) -> Vector2<f64> {
+    fn project(&self, xc: &Vector3<f64>) -> Vector2<f64> {
         Vector2::new(
-            self.f * xc.x / xc.z + self.cx,
-            self.f * xc.y / xc.z + self.cy,
+            self.fx * xc.x / xc.z + self.cx,
+            self.fy * xc.y / xc.z + self.cy,
         )
     }
-    /// Pixel to normalised image coordinates.
     #[inline]
-    pub fn normalise(&self, p: &Vector2<f64>) -> Vector2<f64> {
-        Vector2::new((p.x - self.cx) / self.f, (p.y - self.cy) / self.f)
+    fn normalise(&self, p: &Vector2<f64>) -> Vector2<f64> {
+        Vector2::new((p.x - self.cx) / self.fx, (p.y - self.cy) / self.fy)
     }
 }
 
@@ -71,7 +71,7 @@ fn huber_weight(r2: f64, d: f64) -> f64 {
 
 /// Robust cost of the whole problem; observations behind a camera cost as a large residual.
 pub fn total_cost(
-    poses: &[Pose],
+    poses: &[Se3],
     points: &[Vector3<f64>],
     obs: &[Observation],
     k: &Intrinsics,
@@ -79,7 +79,7 @@ pub fn total_cost(
 ) -> f64 {
     obs.iter()
         .map(|o| {
-            let xc = poses[o.cam].transform(&points[o.point]);
+            let xc = poses[o.cam].act(&points[o.point]);
             if xc.z <= 1e-9 {
                 return huber_cost(1e6, huber_px);
             }
@@ -97,28 +97,35 @@ struct Lin {
 }
 
 fn linearise(
-    pose: &Pose,
+    pose: &Se3,
     x: &Vector3<f64>,
     o: &Vector2<f64>,
     k: &Intrinsics,
     huber: f64,
 ) -> Option<Lin> {
-    let rx = pose.r * x;
-    let xc = rx + pose.t;
+    let rx = pose.rot * x;
+    let xc = rx + pose.trans;
     if xc.z <= 1e-9 {
         return None;
     }
     let iz = 1.0 / xc.z;
     let (xn, yn) = (xc.x * iz, xc.y * iz);
-    let r = Vector2::new(k.f * xn + k.cx - o.x, k.f * yn + k.cy - o.y);
-    let dpi = Matrix2x3::new(k.f * iz, 0.0, -k.f * xn * iz, 0.0, k.f * iz, -k.f * yn * iz);
+    let r = Vector2::new(k.fx * xn + k.cx - o.x, k.fy * yn + k.cy - o.y);
+    let dpi = Matrix2x3::new(
+        k.fx * iz,
+        0.0,
+        -k.fx * xn * iz,
+        0.0,
+        k.fy * iz,
+        -k.fy * yn * iz,
+    );
     let mut jc = SMatrix::<f64, 2, 7>::zeros();
     jc.fixed_view_mut::<2, 3>(0, 0)
         .copy_from(&(dpi * (-rx.cross_matrix())));
     jc.fixed_view_mut::<2, 3>(0, 3).copy_from(&dpi);
     jc[(0, 6)] = xn;
     jc[(1, 6)] = yn;
-    let jp = dpi * pose.r.matrix();
+    let jp = dpi * pose.rot;
     Some(Lin {
         jc,
         jp,
@@ -127,10 +134,10 @@ fn linearise(
     })
 }
 
-/// Bundle-adjust `poses` (indexed by `Observation::cam`), `points` and `k.f` in place.
+/// Bundle-adjust `poses` (indexed by `Observation::cam`), `points` and the focal `k.fx = k.fy` in place.
 /// Cameras with `fixed[c]` keep their pose (the gauge); cameras without observations are untouched.
 pub fn bundle_adjust(
-    poses: &mut [Pose],
+    poses: &mut [Se3],
     fixed: &[bool],
     points: &mut [Vector3<f64>],
     obs: &[Observation],
@@ -177,16 +184,17 @@ pub fn bundle_adjust(
                     continue;
                 }
                 let w = Vector3::new(dc[col], dc[col + 1], dc[col + 2]);
-                np.r = Rotation3::new(w) * np.r;
-                np.t += Vector3::new(dc[col + 3], dc[col + 4], dc[col + 5]);
+                np.rot = Rotation3::new(w).into_inner() * np.rot;
+                np.trans += Vector3::new(dc[col + 3], dc[col + 4], dc[col + 5]);
             }
             let new_points: Vec<Vector3<f64>> =
                 points.iter().zip(&dps).map(|(x, d)| x + d).collect();
             let mut new_k = *k;
             if let Some(fc) = layout.focal_col {
-                new_k.f += dc[fc];
+                new_k.fx += dc[fc];
+                new_k.fy += dc[fc];
             }
-            let new_cost = if new_k.f > 0.0 {
+            let new_cost = if new_k.fx > 0.0 {
                 total_cost(&new_poses, &new_points, obs, &new_k, opts.huber_px)
             } else {
                 f64::INFINITY
@@ -442,16 +450,25 @@ fn back_substitute(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use gems_math::camera_center_from_w2c;
+
+    /// Angle of the rotation between two poses' rotations.
+    fn relative_angle(a: &Se3, b: &Se3) -> f64 {
+        Rotation3::from_matrix_unchecked(a.rot.transpose() * b.rot).angle()
+    }
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
     /// A ring of cameras looking at a cloud; returns ground truth and noisy observations.
-    fn problem(seed: u64) -> (Vec<Pose>, Vec<Vector3<f64>>, Vec<Observation>, Intrinsics) {
+    fn problem(seed: u64) -> (Vec<Se3>, Vec<Vector3<f64>>, Vec<Observation>, Intrinsics) {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let k = Intrinsics {
-            f: 300.0,
+            fx: 300.0,
+            fy: 300.0,
             cx: 160.0,
             cy: 120.0,
+            width: 320,
+            height: 240,
         };
         let pts: Vec<Vector3<f64>> = (0..200)
             .map(|_| {
@@ -462,18 +479,18 @@ mod tests {
                 )
             })
             .collect();
-        let poses: Vec<Pose> = (0..6)
+        let poses: Vec<Se3> = (0..6)
             .map(|i| {
                 let a = -0.4 + 0.16 * i as f64;
                 let r = Rotation3::new(Vector3::new(0.0, -a, 0.0));
                 let c = Vector3::new(6.0 * a.sin(), 0.2 * i as f64 - 0.5, -6.0 * a.cos());
-                Pose { r, t: -(r * c) }
+                Se3::new(r.into_inner(), -(r * c))
             })
             .collect();
         let mut obs = Vec::new();
         for (ci, p) in poses.iter().enumerate() {
             for (pi, x) in pts.iter().enumerate() {
-                let xy = k.project(&p.transform(x));
+                let xy = k.project(&p.act(x));
                 obs.push(Observation {
                     cam: ci,
                     point: pi,
@@ -490,12 +507,14 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let mut poses = gt_poses.clone();
         for p in poses.iter_mut().skip(1) {
-            p.r = Rotation3::new(Vector3::new(
+            p.rot = Rotation3::new(Vector3::new(
                 rng.random_range(-0.02..0.02),
                 rng.random_range(-0.02..0.02),
                 rng.random_range(-0.02..0.02),
-            )) * p.r;
-            p.t += Vector3::new(
+            ))
+            .into_inner()
+                * p.rot;
+            p.trans += Vector3::new(
                 rng.random_range(-0.1..0.1),
                 rng.random_range(-0.1..0.1),
                 0.0,
@@ -511,7 +530,8 @@ mod tests {
             .map(|x| x + Vector3::new(rng.random_range(-0.05..0.05), 0.03, -0.02))
             .collect();
         let mut kk = k;
-        kk.f = 310.0;
+        kk.fx = 310.0;
+        kk.fy = 310.0;
         let s = bundle_adjust(
             &mut poses,
             &fixed,
@@ -525,10 +545,10 @@ mod tests {
             },
         );
         assert!(s.final_cost < 1e-10 * s.initial_cost.max(1.0), "{s:?}");
-        assert!((kk.f - 300.0).abs() < 1e-4, "focal {}", kk.f);
+        assert!((kk.fx - 300.0).abs() < 1e-4, "focal {}", kk.fx);
         for (p, g) in poses.iter().zip(&gt_poses) {
-            assert!((p.r.inverse() * g.r).angle() < 1e-6);
-            assert!((p.centre() - g.centre()).norm() < 1e-5);
+            assert!(relative_angle(p, g) < 1e-6);
+            assert!((camera_center_from_w2c(p) - camera_center_from_w2c(g)).norm() < 1e-5);
         }
     }
 
@@ -558,9 +578,9 @@ mod tests {
         );
         for (p, g) in poses.iter().zip(&gt_poses) {
             assert!(
-                (p.centre() - g.centre()).norm() < 0.05,
+                (camera_center_from_w2c(p) - camera_center_from_w2c(g)).norm() < 0.05,
                 "{}",
-                (p.centre() - g.centre()).norm()
+                (camera_center_from_w2c(p) - camera_center_from_w2c(g)).norm()
             );
         }
     }
@@ -568,29 +588,33 @@ mod tests {
     /// Central finite differences of the residual against the analytic Jacobian.
     #[test]
     fn jacobians_match_finite_differences() {
-        let pose = Pose {
-            r: Rotation3::new(Vector3::new(0.1, -0.2, 0.3)),
-            t: Vector3::new(0.2, -0.1, 4.0),
-        };
+        let pose = Se3::new(
+            Rotation3::new(Vector3::new(0.1, -0.2, 0.3)).into_inner(),
+            Vector3::new(0.2, -0.1, 4.0),
+        );
         let x = Vector3::new(0.3, -0.4, 0.5);
         let k = Intrinsics {
-            f: 250.0,
+            fx: 250.0,
+            fy: 250.0,
             cx: 100.0,
             cy: 80.0,
+            width: 200,
+            height: 160,
         };
         let o = Vector2::new(90.0, 70.0);
         let l = linearise(&pose, &x, &o, &k, 1e9).unwrap();
-        let res = |p: &Pose, x: &Vector3<f64>, k: &Intrinsics| k.project(&p.transform(x)) - o;
+        let res = |p: &Se3, x: &Vector3<f64>, k: &Intrinsics| k.project(&p.act(x)) - o;
         let h = 1e-6;
         for i in 0..7 {
             let mut d = [0.0; 7];
             d[i] = h;
             let step = |s: f64| {
                 let mut p = pose;
-                p.r = Rotation3::new(Vector3::new(d[0], d[1], d[2]) * s) * p.r;
-                p.t += Vector3::new(d[3], d[4], d[5]) * s;
+                p.rot = Rotation3::new(Vector3::new(d[0], d[1], d[2]) * s).into_inner() * p.rot;
+                p.trans += Vector3::new(d[3], d[4], d[5]) * s;
                 let mut kk = k;
-                kk.f += d[6] * s;
+                kk.fx += d[6] * s;
+                kk.fy += d[6] * s;
                 res(&p, &x, &kk)
             };
             let num = (step(1.0) - step(-1.0)) / (2.0 * h);

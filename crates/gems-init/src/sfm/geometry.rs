@@ -2,40 +2,19 @@
 //! RANSAC, essential decomposition with the cheirality test, DLT triangulation, DLT PnP with
 //! RANSAC and Gauss–Newton pose refinement.
 //!
-//! Poses are cam_from_world: X_cam = R·X_world + t (OpenCV camera, z forward).
+//! Poses are cam_from_world [`Se3`]s: X_cam = R·X_world + t (OpenCV camera, z forward).
 
+use gems_math::Se3;
 use nalgebra::{DMatrix, Matrix3, Matrix3x4, Rotation3, SVD, SymmetricEigen, Vector2, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-/// A rigid cam_from_world pose.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Pose {
-    pub r: Rotation3<f64>,
-    pub t: Vector3<f64>,
-}
-
-impl Pose {
-    pub fn identity() -> Pose {
-        Pose {
-            r: Rotation3::identity(),
-            t: Vector3::zeros(),
-        }
-    }
-    #[inline]
-    pub fn transform(&self, x: &Vector3<f64>) -> Vector3<f64> {
-        self.r * x + self.t
-    }
-    /// Camera centre in world coordinates, −Rᵀt.
-    pub fn centre(&self) -> Vector3<f64> {
-        -(self.r.inverse() * self.t)
-    }
-    pub fn matrix(&self) -> Matrix3x4<f64> {
-        let mut m = Matrix3x4::zeros();
-        m.fixed_view_mut::<3, 3>(0, 0).copy_from(self.r.matrix());
-        m.set_column(3, &self.t);
-        m
-    }
+/// The 3×4 projection matrix [R | t] of a cam_from_world pose.
+fn projection_matrix(pose: &Se3) -> Matrix3x4<f64> {
+    let mut m = Matrix3x4::zeros();
+    m.fixed_view_mut::<3, 3>(0, 0).copy_from(&pose.rot);
+    m.set_column(3, &pose.trans);
+    m
 }
 
 /// Eigenvector of the smallest eigenvalue of AᵀA (the least-squares null vector of A).
@@ -211,13 +190,13 @@ fn sample_distinct(rng: &mut ChaCha8Rng, n: usize, k: usize) -> Vec<usize> {
 }
 
 /// Linear (DLT) triangulation from calibrated observations `(pose, normalised xy)`.
-pub fn triangulate(obs: &[(Pose, Vector2<f64>)]) -> Option<Vector3<f64>> {
+pub fn triangulate(obs: &[(Se3, Vector2<f64>)]) -> Option<Vector3<f64>> {
     if obs.len() < 2 {
         return None;
     }
     let mut a = DMatrix::zeros(2 * obs.len(), 4);
     for (k, (pose, x)) in obs.iter().enumerate() {
-        let p = pose.matrix();
+        let p = projection_matrix(pose);
         for c in 0..4 {
             a[(2 * k, c)] = x.x * p[(2, c)] - p[(0, c)];
             a[(2 * k + 1, c)] = x.y * p[(2, c)] - p[(1, c)];
@@ -237,7 +216,7 @@ pub fn decompose_essential(
     e: &Matrix3<f64>,
     x1: &[Vector2<f64>],
     x2: &[Vector2<f64>],
-) -> Option<(Pose, Vec<bool>)> {
+) -> Option<(Se3, Vec<bool>)> {
     let svd = SVD::new(*e, true, true);
     let (mut u, mut vt) = (svd.u?, svd.v_t?);
     if u.determinant() < 0.0 {
@@ -248,19 +227,16 @@ pub fn decompose_essential(
     }
     let w = Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
     let t = u.column(2).into_owned();
-    let mut best: Option<(Pose, Vec<bool>, usize)> = None;
+    let mut best: Option<(Se3, Vec<bool>, usize)> = None;
     for r in [u * w * vt, u * w.transpose() * vt] {
         for s in [1.0, -1.0] {
-            let pose = Pose {
-                r: Rotation3::from_matrix_unchecked(r),
-                t: t * s,
-            };
+            let pose = Se3::new(r, t * s);
             let front: Vec<bool> = x1
                 .iter()
                 .zip(x2)
                 .map(|(a, b)| {
-                    triangulate(&[(Pose::identity(), *a), (pose, *b)])
-                        .is_some_and(|x| x.z > 0.0 && pose.transform(&x).z > 0.0)
+                    triangulate(&[(Se3::identity(), *a), (pose, *b)])
+                        .is_some_and(|x| x.z > 0.0 && pose.act(&x).z > 0.0)
                 })
                 .collect();
             let c = front.iter().filter(|&&f| f).count();
@@ -273,7 +249,7 @@ pub fn decompose_essential(
 }
 
 /// Linear PnP from ≥ 6 world points and calibrated observations; R is projected onto SO(3).
-pub fn pnp_dlt(xw: &[Vector3<f64>], xn: &[Vector2<f64>]) -> Option<Pose> {
+pub fn pnp_dlt(xw: &[Vector3<f64>], xn: &[Vector2<f64>]) -> Option<Se3> {
     let n = xw.len();
     if n < 6 {
         return None;
@@ -325,28 +301,25 @@ pub fn pnp_dlt(xw: &[Vector3<f64>], xn: &[Vector2<f64>]) -> Option<Pose> {
     // R X' + t' = s·R X − s·R c + t' ; dividing by s: R X + (t' / s − R c).
     let t = t_norm / s - rot * c;
     rot = Rotation3::from_matrix(&rot).into_inner();
-    Some(Pose {
-        r: Rotation3::from_matrix_unchecked(rot),
-        t,
-    })
+    Some(Se3::new(rot, t))
 }
 
 /// Robust Gauss–Newton refinement of a single pose on calibrated observations (Huber on the
 /// normalised reprojection error, `huber` in normalised units).
 pub fn refine_pose(
-    pose: Pose,
+    pose: Se3,
     xw: &[Vector3<f64>],
     xn: &[Vector2<f64>],
     huber: f64,
     iters: usize,
-) -> Pose {
+) -> Se3 {
     let mut p = pose;
     for _ in 0..iters {
         let mut h = nalgebra::Matrix6::<f64>::zeros();
         let mut g = nalgebra::Vector6::<f64>::zeros();
         for (x, o) in xw.iter().zip(xn) {
-            let rx = p.r * x;
-            let xc = rx + p.t;
+            let rx = p.rot * x;
+            let xc = rx + p.trans;
             if xc.z <= 1e-9 {
                 continue;
             }
@@ -370,8 +343,8 @@ pub fn refine_pose(
             break;
         };
         let w = Vector3::new(d[0], d[1], d[2]);
-        p.r = Rotation3::new(w) * p.r;
-        p.t += Vector3::new(d[3], d[4], d[5]);
+        p.rot = Rotation3::new(w).into_inner() * p.rot;
+        p.trans += Vector3::new(d[3], d[4], d[5]);
         if d.norm() < 1e-10 {
             break;
         }
@@ -387,22 +360,22 @@ pub fn ransac_pnp(
     thresh: f64,
     max_iters: usize,
     seed: u64,
-) -> Option<(Pose, Vec<bool>)> {
+) -> Option<(Se3, Vec<bool>)> {
     let n = xw.len();
     if n < 8 {
         return None;
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let inl = |p: &Pose| -> Vec<bool> {
+    let inl = |p: &Se3| -> Vec<bool> {
         xw.iter()
             .zip(xn)
             .map(|(x, o)| {
-                let c = p.transform(x);
+                let c = p.act(x);
                 c.z > 0.0 && (Vector2::new(c.x / c.z, c.y / c.z) - o).norm() < thresh
             })
             .collect()
     };
-    let mut best: Option<(Pose, usize)> = None;
+    let mut best: Option<(Se3, usize)> = None;
     let mut iters = max_iters;
     let mut it = 0;
     while it < iters {
@@ -440,9 +413,14 @@ pub fn triangulation_angle(c1: &Vector3<f64>, c2: &Vector3<f64>, x: &Vector3<f64
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Angle of the rotation between two poses' rotations.
+    fn relative_angle(a: &Se3, b: &Se3) -> f64 {
+        Rotation3::from_matrix_unchecked(a.rot.transpose() * b.rot).angle()
+    }
     use rand::RngExt;
 
-    fn random_scene(seed: u64, n: usize) -> (Vec<Vector3<f64>>, Pose, Pose) {
+    fn random_scene(seed: u64, n: usize) -> (Vec<Vector3<f64>>, Se3, Se3) {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let pts = (0..n)
             .map(|_| {
@@ -453,15 +431,15 @@ mod tests {
                 )
             })
             .collect();
-        let p2 = Pose {
-            r: Rotation3::new(Vector3::new(0.05, -0.1, 0.02)),
-            t: Vector3::new(-0.6, 0.1, 0.05),
-        };
-        (pts, Pose::identity(), p2)
+        let p2 = Se3::new(
+            Rotation3::new(Vector3::new(0.05, -0.1, 0.02)).into_inner(),
+            Vector3::new(-0.6, 0.1, 0.05),
+        );
+        (pts, Se3::identity(), p2)
     }
 
-    fn project(p: &Pose, x: &Vector3<f64>) -> Vector2<f64> {
-        let c = p.transform(x);
+    fn project(p: &Se3, x: &Vector3<f64>) -> Vector2<f64> {
+        let c = p.act(x);
         Vector2::new(c.x / c.z, c.y / c.z)
     }
 
@@ -482,9 +460,9 @@ mod tests {
             .map(|i| (x1[i], x2[i]))
             .unzip();
         let (rel, _) = decompose_essential(&e, &a, &b).unwrap();
-        let rerr = (rel.r.inverse() * p2.r).angle();
+        let rerr = relative_angle(&rel, &p2);
         assert!(rerr < 1e-6, "rotation error {rerr}");
-        let terr = rel.t.normalize().dot(&p2.t.normalize());
+        let terr = rel.trans.normalize().dot(&p2.trans.normalize());
         assert!(terr > 1.0 - 1e-9, "translation direction cos {terr}");
     }
 
@@ -498,12 +476,12 @@ mod tests {
         let (p, mask) = ransac_pnp(&pts, &xn, 2e-3, 500, 5).unwrap();
         assert!(mask[15..].iter().all(|&b| b) && !mask[..15].iter().any(|&b| b));
         // acos near 1 limits the angle to ~1e-8 even for identical rotations.
-        assert!((p.r.inverse() * p2.r).angle() < 1e-6);
-        assert!((p.t - p2.t).norm() < 1e-8);
+        assert!(relative_angle(&p, &p2) < 1e-6);
+        assert!((p.trans - p2.trans).norm() < 1e-8);
 
         let x = pts[20];
         let tri = triangulate(&[
-            (Pose::identity(), project(&Pose::identity(), &x)),
+            (Se3::identity(), project(&Se3::identity(), &x)),
             (p2, project(&p2, &x)),
         ])
         .unwrap();
@@ -514,12 +492,12 @@ mod tests {
     fn refine_pose_converges_from_perturbation() {
         let (pts, _, p2) = random_scene(3, 40);
         let xn: Vec<_> = pts.iter().map(|x| project(&p2, x)).collect();
-        let start = Pose {
-            r: Rotation3::new(Vector3::new(0.03, 0.02, -0.01)) * p2.r,
-            t: p2.t + Vector3::new(0.05, -0.05, 0.1),
-        };
+        let start = Se3::new(
+            Rotation3::new(Vector3::new(0.03, 0.02, -0.01)).into_inner() * p2.rot,
+            p2.trans + Vector3::new(0.05, -0.05, 0.1),
+        );
         let p = refine_pose(start, &pts, &xn, 1.0, 30);
-        assert!((p.r.inverse() * p2.r).angle() < 1e-9);
-        assert!((p.t - p2.t).norm() < 1e-9);
+        assert!(relative_angle(&p, &p2) < 1e-9);
+        assert!((p.trans - p2.trans).norm() < 1e-9);
     }
 }

@@ -1,10 +1,11 @@
 //! Incremental reconstruction at the working level: tracks from verified pair matches, the
 //! initial pair, PnP registration, triangulation and bundle adjustment.
 
-use super::ba::{self, BaOptions, Intrinsics, Observation};
+use super::ba::{self, BaOptions, Observation, Pinhole};
 use super::features::Features;
-use super::geometry::{self, Pose};
+use super::geometry;
 use super::{PairCorr, PairMatches, SfmOptions};
+use gems_math::{Intrinsics, Se3, camera_center_from_w2c};
 use nalgebra::{Vector2, Vector3};
 
 /// One observation of a track: view, working-level pixel, and whether it is still trusted.
@@ -25,7 +26,7 @@ pub(crate) struct Track {
 #[derive(Clone, Debug)]
 pub(crate) struct Recon {
     pub k: Intrinsics,
-    pub poses: Vec<Option<Pose>>,
+    pub poses: Vec<Option<Se3>>,
     pub tracks: Vec<Track>,
 }
 
@@ -52,7 +53,7 @@ impl Recon {
         let (mut s, mut n) = (0.0, 0usize);
         for (t, o) in self.used_obs() {
             if let (Some(x), Some(p)) = (t.xyz, self.poses[o.view]) {
-                s += (self.k.project(&p.transform(&x)) - o.xy).norm();
+                s += (self.k.project(&p.act(&x)) - o.xy).norm();
                 n += 1;
             }
         }
@@ -127,7 +128,7 @@ pub(crate) fn build_tracks(feats: &[Features], pairs: &[PairMatches]) -> Vec<Tra
 /// observation while the fit is inconsistent. Returns whether a point was set.
 fn triangulate_track(
     t: &mut Track,
-    poses: &[Option<Pose>],
+    poses: &[Option<Se3>],
     k: &Intrinsics,
     opts: &SfmOptions,
 ) -> bool {
@@ -136,7 +137,7 @@ fn triangulate_track(
         .collect();
     let min_angle = opts.min_tri_angle_deg.to_radians();
     while use_.len() >= 2 {
-        let obs: Vec<(Pose, Vector2<f64>)> = use_
+        let obs: Vec<(Se3, Vector2<f64>)> = use_
             .iter()
             .map(|&i| {
                 (
@@ -152,7 +153,7 @@ fn triangulate_track(
         let errs: Vec<f64> = use_
             .iter()
             .map(|&i| {
-                let c = poses[t.obs[i].view].expect("registered").transform(&x);
+                let c = poses[t.obs[i].view].expect("registered").act(&x);
                 if c.z <= 0.0 {
                     f64::INFINITY
                 } else {
@@ -172,7 +173,11 @@ fn triangulate_track(
         }
         let centres: Vec<Vector3<f64>> = use_
             .iter()
-            .map(|&i| poses[t.obs[i].view].expect("registered").centre())
+            .map(|&i| {
+                poses[t.obs[i].view]
+                    .map(|p| camera_center_from_w2c(&p))
+                    .expect("registered")
+            })
             .collect();
         let mut max_angle: f64 = 0.0;
         for a in 0..centres.len() {
@@ -217,10 +222,10 @@ fn run_ba(r: &mut Recon, fixed_view: usize, refine_focal: bool, iters: usize, op
     if obs.is_empty() {
         return;
     }
-    let mut poses: Vec<Pose> = r
+    let mut poses: Vec<Se3> = r
         .poses
         .iter()
-        .map(|p| p.unwrap_or(Pose::identity()))
+        .map(|p| p.unwrap_or(Se3::identity()))
         .collect();
     let fixed: Vec<bool> = (0..poses.len()).map(|v| v == fixed_view).collect();
     ba::bundle_adjust(
@@ -258,7 +263,7 @@ fn filter_outliers(r: &mut Recon, opts: &SfmOptions) {
             if !o.active {
                 continue;
             }
-            let c = p.transform(&x);
+            let c = p.act(&x);
             if c.z <= 0.0 || (k.project(&c) - o.xy).norm() > opts.max_reproj_px {
                 o.active = false;
             } else {
@@ -287,14 +292,14 @@ fn initial_pair(
     pairs: &[PairCorr],
     k: &Intrinsics,
     opts: &SfmOptions,
-) -> Option<(usize, usize, Pose)> {
+) -> Option<(usize, usize, Se3)> {
     let mut order: Vec<&PairCorr> = pairs.iter().collect();
     order.sort_by(|a, b| {
         b.x1.len()
             .cmp(&a.x1.len())
             .then((a.i, a.j).cmp(&(b.i, b.j)))
     });
-    let mut best: Option<(f64, usize, usize, Pose)> = None;
+    let mut best: Option<(f64, usize, usize, Se3)> = None;
     // A wide initial baseline: with a few degrees the rotation and the sideways translation of
     // the pair trade off against each other (bas-relief ambiguity) under blur noise, and the
     // error locks in as every later view is registered against it.
@@ -304,7 +309,7 @@ fn initial_pair(
         let x2: Vec<_> = pm.x2.iter().map(|p| k.normalise(p)).collect();
         let seed = opts.seed.wrapping_add(0x1000 + (pm.i * 7919 + pm.j) as u64);
         let Some((e, mask)) =
-            geometry::ransac_epipolar(&x1, &x2, true, opts.max_reproj_px / k.f, 2000, seed)
+            geometry::ransac_epipolar(&x1, &x2, true, opts.max_reproj_px / k.fx, 2000, seed)
         else {
             continue;
         };
@@ -315,13 +320,13 @@ fn initial_pair(
         let Some((rel, front)) = geometry::decompose_essential(&e, &a, &b) else {
             continue;
         };
-        let c2 = rel.centre();
+        let c2 = camera_center_from_w2c(&rel);
         let mut angles: Vec<f64> = a
             .iter()
             .zip(&b)
             .zip(&front)
             .filter(|(_, f)| **f)
-            .filter_map(|((p, q), _)| geometry::triangulate(&[(Pose::identity(), *p), (rel, *q)]))
+            .filter_map(|((p, q), _)| geometry::triangulate(&[(Se3::identity(), *p), (rel, *q)]))
             .map(|x| geometry::triangulation_angle(&Vector3::zeros(), &c2, &x))
             .collect();
         if angles.len() < opts.min_pair_inliers {
@@ -356,7 +361,7 @@ pub(crate) fn reconstruct(
         poses: vec![None; nviews],
         tracks,
     };
-    r.poses[i0] = Some(Pose::identity());
+    r.poses[i0] = Some(Se3::identity());
     r.poses[j0] = Some(rel);
     triangulate_all(&mut r, opts);
     run_ba(&mut r, i0, false, 30, opts);
@@ -404,7 +409,7 @@ pub(crate) fn reconstruct(
                 .collect();
             let seed = opts.seed.wrapping_add(0x2000 + v as u64 * 131 + n as u64);
             let Some((pose, mask)) =
-                geometry::ransac_pnp(&xw, &xn, opts.max_reproj_px / r.k.f, 1000, seed)
+                geometry::ransac_pnp(&xw, &xn, opts.max_reproj_px / r.k.fx, 1000, seed)
             else {
                 continue;
             };
@@ -455,7 +460,7 @@ pub(crate) fn refine_focal_bounded(
     let mut out = r.clone();
     run_ba(&mut out, fixed, true, 50, opts);
     filter_outliers(&mut out, opts);
-    (out.k.f >= lo && out.k.f <= hi && out.registered() == r.registered()).then_some(out)
+    (out.k.fx >= lo && out.k.fx <= hi && out.registered() == r.registered()).then_some(out)
 }
 
 #[cfg(test)]

@@ -40,7 +40,6 @@ mod tracking;
 
 pub use colmap_cli::{ColmapCliOptions, run_colmap_cli};
 pub use gems_data::colmap::SparseModel;
-pub use geometry::Pose;
 pub use output::{draw_top_view, to_colmap_model, write_outputs};
 
 use features::{FeatureParams, Features, Gray};
@@ -178,7 +177,7 @@ pub struct SfmCamera {
 pub struct SfmView {
     pub name: String,
     /// cam_from_world, or None when the view could not be registered.
-    pub pose: Option<Pose>,
+    pub pose: Option<gems_math::Se3>,
     pub observations: Vec<([f64; 2], usize)>,
 }
 
@@ -323,10 +322,14 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         };
         let (sw, sh) = (w as f64 * scale, h as f64 * scale);
         for f in focals {
-            let k = ba::Intrinsics {
-                f,
+            // One focal for both axes: the bundle adjustment refines fx = fy together.
+            let k = gems_math::Intrinsics {
+                fx: f,
+                fy: f,
                 cx: 0.5 * sw,
                 cy: 0.5 * sh,
+                width: work[0].w as u32,
+                height: work[0].h as u32,
             };
             let rec = incremental::reconstruct(tracks.clone(), &corrs, images.len(), k, opts);
             let Some(rec) = rec else { continue };
@@ -340,7 +343,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
             tracing::info!(
                 working_size = ws,
                 focal_start = attempt.focal_start_px,
-                focal = attempt.recon.k.f / scale,
+                focal = attempt.recon.k.fx / scale,
                 registered = attempt.recon.registered(),
                 error_px = attempt.error_px,
                 "sfm attempt"
@@ -372,7 +375,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     if opts.focal_px.is_none()
         && let Some(r) = refine_focal_around(&rec, long * scale, opts)
     {
-        tracing::info!(focal = r.k.f / scale, "focal refined");
+        tracing::info!(focal = r.k.fx / scale, "focal refined");
         rec = r;
     }
     let mut result = output::assemble(images, &rec, scale, opts.focal_px.is_some(), ws);
@@ -454,7 +457,7 @@ fn refine_focal_around(
     long_px: f64,
     opts: &SfmOptions,
 ) -> Option<incremental::Recon> {
-    let f0 = rec.k.f;
+    let f0 = rec.k.fx;
     let mut c: Vec<f64> = opts.focal_candidates.iter().map(|c| c * long_px).collect();
     c.sort_by(|a, b| a.total_cmp(b));
     let lo = c

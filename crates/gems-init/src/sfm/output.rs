@@ -1,11 +1,13 @@
 //! From the working-level reconstruction to full-resolution results, and the files written for
 //! users: COLMAP `sparse/0`, `sfm_report.json` and `sfm_topview.png`.
 
+use super::ba::Pinhole;
 use super::incremental::Recon;
 use super::{SfmCamera, SfmError, SfmImage, SfmPoint, SfmResult, SfmStats, SfmView};
 use gems_data::colmap::{
     self, Camera, CameraModel, Image, ModelFormat, Point2D, Point3D, SparseModel,
 };
+use gems_math::camera_center_from_w2c;
 use nalgebra::{Vector2, Vector3};
 use std::path::Path;
 
@@ -41,7 +43,7 @@ pub(crate) fn assemble(
     let camera = SfmCamera {
         width: w,
         height: h,
-        focal: rec.k.f / scale,
+        focal: rec.k.fx / scale,
         cx: rec.k.cx / scale,
         cy: rec.k.cy / scale,
     };
@@ -73,7 +75,7 @@ pub(crate) fn assemble(
         for o in &used {
             let full = o.xy / scale;
             let pose = rec.poses[o.view].expect("registered");
-            let e = (rec.k.project(&pose.transform(&x)) - o.xy).norm() / scale;
+            let e = (rec.k.project(&pose.act(&x)) - o.xy).norm() / scale;
             perr += e;
             let c = sample_rgb(&images[o.view].image, full.x, full.y);
             for k in 0..3 {
@@ -145,15 +147,7 @@ pub fn to_colmap_model(r: &SfmResult) -> SparseModel {
         .enumerate()
         .filter_map(|(i, v)| {
             let p = v.pose?;
-            let m = p.r.matrix();
-            let pose = gems_math::Pose {
-                rotation: [
-                    [m[(0, 0)], m[(0, 1)], m[(0, 2)]],
-                    [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
-                    [m[(2, 0)], m[(2, 1)], m[(2, 2)]],
-                ],
-                translation: [p.t.x, p.t.y, p.t.z],
-            };
+            let pose = gems_math::Pose::from(&p);
             let mut im = Image::from_pose(i as u32 + 1, 1, &v.name, &pose);
             im.points2d = v
                 .observations
@@ -202,7 +196,7 @@ pub fn draw_top_view(r: &SfmResult, size: u32) -> image::RgbImage {
     let mut up = Vector3::zeros();
     let mut fwd = Vector3::zeros();
     for p in &poses {
-        let rt = p.r.inverse();
+        let rt = p.rot.transpose();
         up -= rt * Vector3::y();
         fwd += rt * Vector3::z();
     }
@@ -213,7 +207,10 @@ pub fn draw_top_view(r: &SfmResult, size: u32) -> image::RgbImage {
         .unwrap_or_else(|| up.cross(&Vector3::x()).normalize());
     let ax1 = ax2.cross(&up);
     let proj = |x: &Vector3<f64>| Vector2::new(x.dot(&ax1), -x.dot(&ax2));
-    let centres: Vec<Vector2<f64>> = poses.iter().map(|p| proj(&p.centre())).collect();
+    let centres: Vec<Vector2<f64>> = poses
+        .iter()
+        .map(|p| proj(&camera_center_from_w2c(p)))
+        .collect();
     let pts: Vec<(Vector2<f64>, [u8; 3])> = r
         .points
         .iter()
@@ -259,7 +256,7 @@ pub fn draw_top_view(r: &SfmResult, size: u32) -> image::RgbImage {
     }
     for (p, c) in poses.iter().zip(&centres) {
         let (x, y) = to_px(c);
-        let dir = proj(&(p.centre() + p.r.inverse() * Vector3::z())) - c;
+        let dir = proj(&(camera_center_from_w2c(p) + p.rot.transpose() * Vector3::z())) - c;
         let dir = dir.try_normalize(1e-12).unwrap_or(Vector2::zeros());
         for k in 0..14 {
             put(

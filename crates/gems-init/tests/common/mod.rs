@@ -5,7 +5,8 @@
 
 #![allow(dead_code)]
 
-use gems_init::sfm::{Pose, SfmImage};
+use gems_init::sfm::SfmImage;
+use gems_math::{Se3, camera_center_from_w2c};
 use nalgebra::{Rotation3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -13,7 +14,7 @@ use rand_chacha::ChaCha8Rng;
 pub struct Scene {
     pub images: Vec<SfmImage>,
     /// Ground-truth cam_from_world pose of each view (middle burst frame).
-    pub gt: Vec<Pose>,
+    pub gt: Vec<Se3>,
     pub focal: f64,
 }
 
@@ -152,7 +153,7 @@ fn planes() -> Vec<Plane> {
 }
 
 fn render(
-    pose: &Pose,
+    pose: &Se3,
     f: f64,
     w: u32,
     h: u32,
@@ -160,8 +161,8 @@ fn render(
     texs: &[Vec<[f32; 3]>],
     acc: &mut [f32],
 ) {
-    let rt = pose.r.inverse();
-    let c = pose.centre();
+    let rt = pose.rot.transpose();
+    let c = camera_center_from_w2c(pose);
     for y in 0..h {
         for x in 0..w {
             // 2×2 supersampling against aliasing of texture edges.
@@ -224,12 +225,8 @@ pub fn scene(views: usize, w: u32, h: u32, level: usize, max_blur_frac: f64, see
             let z = (target - c).normalize();
             let x = Vector3::new(0.0, 1.0, 0.0).cross(&z).normalize();
             let y = z.cross(&x);
-            let r = Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_rows(&[
-                x.transpose(),
-                y.transpose(),
-                z.transpose(),
-            ]));
-            Pose { r, t: -(r * c) }
+            let r = nalgebra::Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]);
+            Se3::new(r, -(r * c))
         };
         let mid = look(centre);
         // Shake: a random rotation rate and translation per burst, scaled so that 10 frame
@@ -250,9 +247,9 @@ pub fn scene(views: usize, w: u32, h: u32, level: usize, max_blur_frac: f64, see
         let half = (level / 2) as i64;
         for k in -half..=half {
             let s = k as f64 / 10.0;
-            let r = Rotation3::new(axis * total_angle * s) * mid.r;
+            let r = Rotation3::new(axis * total_angle * s).into_inner() * mid.rot;
             let c = centre + trans * s * 10.0;
-            let p = Pose { r, t: -(r * c) };
+            let p = Se3::new(r, -(r * c));
             render(&p, f, w, h, &planes, &texs, &mut acc);
         }
         let n = (2 * half + 1) as f32;
@@ -275,12 +272,17 @@ pub fn scene(views: usize, w: u32, h: u32, level: usize, max_blur_frac: f64, see
 
 /// Translation RMSE after Sim(3) (Umeyama) alignment of the registered camera centres to the
 /// ground truth, as a fraction of the ground-truth path extent (largest centre distance).
-pub fn aligned_rmse_fraction(est: &[Option<Pose>], gt: &[Pose]) -> f64 {
+pub fn aligned_rmse_fraction(est: &[Option<Se3>], gt: &[Se3]) -> f64 {
     let (src, dst): (Vec<[f64; 3]>, Vec<[f64; 3]>) = est
         .iter()
         .zip(gt)
         .filter_map(|(e, g)| {
-            e.map(|e| -> ([f64; 3], [f64; 3]) { (e.centre().into(), g.centre().into()) })
+            e.map(|e| -> ([f64; 3], [f64; 3]) {
+                (
+                    camera_center_from_w2c(&e).into(),
+                    camera_center_from_w2c(g).into(),
+                )
+            })
         })
         .unzip();
     let sim = gems_math::align::umeyama(&src, &dst, true).expect("alignment");
@@ -296,7 +298,7 @@ pub fn aligned_rmse_fraction(est: &[Option<Pose>], gt: &[Pose]) -> f64 {
     let mut extent: f64 = 0.0;
     for a in gt {
         for b in gt {
-            extent = extent.max((a.centre() - b.centre()).norm());
+            extent = extent.max((camera_center_from_w2c(a) - camera_center_from_w2c(b)).norm());
         }
     }
     mse.sqrt() / extent
