@@ -12,7 +12,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::error::{DataError, FormatError, Result};
-use crate::fsutil::{read_bytes, read_text, write_atomic};
+use crate::fsutil::{read_bytes, read_text};
 use gems_math::{Intrinsics, Pose};
 
 /// COLMAP camera models (ids 0–10 of COLMAP's model registry).
@@ -407,9 +407,9 @@ pub fn write_model(dir: &Path, model: &SparseModel, format: ModelFormat) -> Resu
         ),
     };
     let ext = format.ext();
-    write_atomic(&dir.join(format!("cameras.{ext}")), &c)?;
-    write_atomic(&dir.join(format!("images.{ext}")), &i)?;
-    write_atomic(&dir.join(format!("points3D.{ext}")), &p)?;
+    gems_fs::write_atomic(&dir.join(format!("cameras.{ext}")), &c)?;
+    gems_fs::write_atomic(&dir.join(format!("images.{ext}")), &i)?;
+    gems_fs::write_atomic(&dir.join(format!("points3D.{ext}")), &p)?;
     Ok(())
 }
 

@@ -90,5 +90,12 @@ impl DataError {
     }
 }
 
+/// A failed write or folder listing (gems-fs) is an I/O error on the path it names.
+impl From<gems_fs::FsError> for DataError {
+    fn from(e: gems_fs::FsError) -> Self {
+        Self::io(e.path, e.source)
+    }
+}
+
 /// Result alias of the data layer.
 pub type Result<T, E = DataError> = std::result::Result<T, E>;

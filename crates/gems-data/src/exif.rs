@@ -14,7 +14,6 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use crate::fsutil::list_images;
 use crate::scene::Scene;
 
 /// A focal length and where it came from (shown by `gems info`).
@@ -90,7 +89,7 @@ pub fn folder_focal(dir: &Path) -> Option<FocalSource> {
     } else {
         dir.to_path_buf()
     };
-    list_images(&img_dir).ok()?.iter().find_map(|p| {
+    gems_fs::list_images(&img_dir).ok()?.iter().find_map(|p| {
         let (w, h) = crate::image::image_dimensions(p).ok()?;
         focal_from_exif(p, w, h)
     })

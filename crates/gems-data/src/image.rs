@@ -12,7 +12,6 @@ use std::sync::{Arc, Mutex};
 use rayon::prelude::*;
 
 use crate::error::{DataError, Result};
-use crate::fsutil::write_atomic;
 
 /// An RGB image, interleaved `f32` in `[0, 1]`; `data.len() == width * height * 3`.
 #[derive(Debug, Clone, PartialEq)]
@@ -117,7 +116,7 @@ fn save_image(path: &Path, img: &ImageRgb, format: image::ImageFormat) -> Result
         _ => rgb.write_to(&mut buf, format),
     }
     .map_err(|e| image_error(path, e))?;
-    write_atomic(path, buf.get_ref())
+    Ok(gems_fs::write_atomic(path, buf.get_ref())?)
 }
 
 /// Writes `img` in the format given by the extension of `path` (png, jpg/jpeg).

@@ -40,7 +40,6 @@ pub mod scene;
 pub mod undistort;
 
 pub use error::{DataError, FormatError, Result};
-pub use fsutil::write_atomic;
 pub use image::{ImageCache, ImageRgb, load_image, save_png};
 pub use info::{SceneInfo, scene_info};
 pub use manifest::{Manifest, ManifestPoses, write_hold_marker, write_manifest};

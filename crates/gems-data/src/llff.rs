@@ -11,7 +11,7 @@
 use std::path::Path;
 
 use crate::error::{DataError, FormatError, Result};
-use crate::fsutil::{read_bytes, write_atomic};
+use crate::fsutil::read_bytes;
 use crate::npy;
 use gems_math::{Intrinsics, Pose};
 
@@ -207,7 +207,7 @@ pub fn read_poses_bounds(path: &Path) -> Result<Vec<LlffRow>> {
 
 /// Writes `poses_bounds.npy` atomically.
 pub fn write_poses_bounds(path: &Path, rows: &[LlffRow]) -> Result<()> {
-    write_atomic(path, &poses_bounds_to_bytes(rows))
+    Ok(gems_fs::write_atomic(path, &poses_bounds_to_bytes(rows))?)
 }
 
 /// Reads `poses_bounds_subframes.npy`.
@@ -230,8 +230,8 @@ pub fn write_subframes(path: &Path, rows: &[Vec<LlffRow>]) -> Result<()> {
     }
     let mut data = Vec::with_capacity(rows.len() * s * 17);
     rows.iter().flatten().for_each(|r| r.push_to(&mut data));
-    write_atomic(
+    Ok(gems_fs::write_atomic(
         path,
         &npy::to_bytes_f64(&[rows.len() as u64, s as u64, 17], &data),
-    )
+    )?)
 }

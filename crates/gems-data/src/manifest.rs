@@ -14,7 +14,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{DataError, Result};
-use crate::fsutil::{read_text, write_atomic};
+use crate::fsutil::read_text;
 
 /// File name of the scene manifest.
 pub const MANIFEST_FILE: &str = "gems_scene.json";
@@ -65,7 +65,7 @@ pub fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
     let mut text = serde_json::to_string_pretty(manifest)
         .map_err(|e| DataError::format(&path, e.to_string()))?;
     text.push('\n');
-    write_atomic(&path, text.as_bytes())
+    Ok(gems_fs::write_atomic(&path, text.as_bytes())?)
 }
 
 /// Reads `dir/gems_scene.json` if it exists.
@@ -97,7 +97,10 @@ pub fn write_hold_marker(dir: &Path, hold: i64) -> Result<()> {
             std::fs::remove_file(&path).map_err(|e| DataError::io(&path, e))?;
         }
     }
-    write_atomic(&dir.join(format!("hold={hold}")), b"")
+    Ok(gems_fs::write_atomic(
+        &dir.join(format!("hold={hold}")),
+        b"",
+    )?)
 }
 
 /// The value of the `hold=<n>` marker in `dir`, if there is one.

@@ -14,7 +14,7 @@ use std::path::Path;
 use serde_json::{Map, Value, json};
 
 use crate::error::{DataError, FormatError, Result};
-use crate::fsutil::{read_text, write_atomic};
+use crate::fsutil::read_text;
 use gems_math::{Intrinsics, Pose};
 
 /// How a frame's intrinsics are given.
@@ -404,5 +404,8 @@ pub fn transforms_to_json(t: &Transforms) -> String {
 
 /// Writes a transforms file atomically.
 pub fn write_transforms(path: &Path, t: &Transforms) -> Result<()> {
-    write_atomic(path, transforms_to_json(t).as_bytes())
+    Ok(gems_fs::write_atomic(
+        path,
+        transforms_to_json(t).as_bytes(),
+    )?)
 }

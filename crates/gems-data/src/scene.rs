@@ -71,7 +71,7 @@ use serde::Serialize;
 use crate::colmap::{self, SparseModel};
 use crate::error::{DataError, Result};
 use crate::events::{EventFiles, find_event_files};
-use crate::fsutil::{list_images, read_text};
+use crate::fsutil::read_text;
 use crate::image::{
     downscale_area, downscaled_size, image_dimensions, load_image, save_image_auto,
 };
@@ -298,7 +298,7 @@ pub fn detect_layout(root: &Path) -> Result<Layout> {
         Layout::Llff
     } else if root.join("images").is_dir() {
         Layout::Gems
-    } else if !list_images(root)?.is_empty() {
+    } else if !gems_fs::list_images(root)?.is_empty() {
         Layout::Folder
     } else {
         return Err(DataError::Missing {
@@ -463,7 +463,7 @@ impl Cache {
 /// `dst` at the right size are kept. Returns the number of images written. `dst` must not be a
 /// user's folder: [`open_scene`] passes a cache folder.
 pub fn ensure_downscaled(src: &Path, dst: &Path, factor: u32) -> Result<usize> {
-    let sources = list_images(src)?;
+    let sources = gems_fs::list_images(src)?;
     std::fs::create_dir_all(dst).map_err(|e| DataError::io(dst, e))?;
     let todo: Vec<&PathBuf> = sources
         .iter()
@@ -559,7 +559,7 @@ fn view_images(
     if !full_dir.is_dir() {
         // Some redistributions ship only the downscaled folder.
         if f > 1 && scaled_dir.is_dir() {
-            let scaled = list_images(&scaled_dir)?;
+            let scaled = gems_fs::list_images(&scaled_dir)?;
             if !scaled.is_empty() {
                 return Ok((scaled.iter().map(|p| file_name(p)).collect(), scaled));
             }
@@ -569,7 +569,7 @@ fn view_images(
             what: "image folder".into(),
         });
     }
-    let full = list_images(&full_dir)?;
+    let full = gems_fs::list_images(&full_dir)?;
     if full.is_empty() {
         return Err(DataError::Missing {
             path: full_dir,
@@ -583,7 +583,7 @@ fn view_images(
     if scaled_dir.is_dir() {
         return Ok((
             names,
-            pair_scaled(&full, &list_images(&scaled_dir)?, &scaled_dir)?,
+            pair_scaled(&full, &gems_fs::list_images(&scaled_dir)?, &scaled_dir)?,
         ));
     }
     let dst = cache.path(
@@ -1085,7 +1085,7 @@ fn open_llff(
 
 /// A plain folder of photos or video frames: every image a training view, no poses.
 fn open_folder(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Scene> {
-    let full = list_images(root)?;
+    let full = gems_fs::list_images(root)?;
     let f = opts.downscale.max(1);
     let images = if f == 1 {
         full.clone()
@@ -1248,7 +1248,7 @@ fn views_from_frames(
             p = if same.is_file() {
                 same
             } else {
-                list_images(&dst)?
+                gems_fs::list_images(&dst)?
                     .into_iter()
                     .find(|q| stem(q) == stem(&p))
                     .ok_or_else(|| DataError::Missing {

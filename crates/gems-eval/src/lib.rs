@@ -84,13 +84,23 @@ pub enum EvalError {
     Train(#[from] gems_train::TrainError),
 }
 
+/// A failed atomic write (gems-fs) is an I/O error on the path it names.
+impl From<gems_fs::FsError> for EvalError {
+    fn from(e: gems_fs::FsError) -> Self {
+        EvalError::Io {
+            path: e.path,
+            source: e.source,
+        }
+    }
+}
+
 /// Writes `metrics.json` atomically (pretty-printed).
 pub fn write_metrics_json(path: &Path, report: &MetricsReport) -> Result<(), EvalError> {
     let text = serde_json::to_string_pretty(report).map_err(|e| EvalError::Format {
         path: path.to_path_buf(),
         reason: e.to_string(),
     })?;
-    gems_data::write_atomic(path, text.as_bytes())?;
+    gems_fs::write_atomic(path, text.as_bytes())?;
     Ok(())
 }
 

@@ -346,7 +346,7 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
              opens at that camera).</p>\n",
         );
         html.push_str(&frag);
-        gems_data::write_atomic(
+        gems_fs::write_atomic(
             &dir.join("viewer.html"),
             crate::viewer::viewer_page(scene, &input.title).as_bytes(),
         )?;
@@ -456,6 +456,6 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
     }
     html.push_str("</body></html>\n");
     let path = dir.join("report.html");
-    gems_data::write_atomic(&path, html.as_bytes())?;
+    gems_fs::write_atomic(&path, html.as_bytes())?;
     Ok(path)
 }

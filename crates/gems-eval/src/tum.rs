@@ -25,7 +25,7 @@ pub fn format_tum(poses: &[(f64, Se3)]) -> String {
 
 /// Writes a TUM file atomically.
 pub fn write_tum(path: &Path, poses: &[(f64, Se3)]) -> Result<(), EvalError> {
-    gems_data::write_atomic(path, format_tum(poses).as_bytes())?;
+    gems_fs::write_atomic(path, format_tum(poses).as_bytes())?;
     Ok(())
 }
 

@@ -38,6 +38,8 @@ pub enum PipelineError {
     #[error("writing the imported COLMAP model")]
     WriteColmapModel(#[source] gems_data::DataError),
     #[error(transparent)]
+    Fs(#[from] gems_fs::FsError),
+    #[error(transparent)]
     Data(#[from] gems_data::DataError),
     #[error(transparent)]
     Sfm(#[from] gems_init::sfm::SfmError),

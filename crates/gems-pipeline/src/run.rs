@@ -159,7 +159,7 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
         Trainer::new(job.cfg, input)?
     };
     trainer.set_engine(job.engine);
-    gems_train::write_atomic(
+    gems_fs::write_atomic(
         &job.output.join("config.toml"),
         trainer.config().to_toml().as_bytes(),
     )?;

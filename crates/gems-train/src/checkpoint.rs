@@ -11,9 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::TrainError;
 use crate::adam::{AdamState, GaussianAdam};
 use crate::config::TrainConfig;
-use crate::tensors::{
-    TensorReader, TensorSet, add_gaussians, format_err, read, read_gaussians, write_atomic,
-};
+use crate::tensors::{TensorReader, TensorSet, add_gaussians, format_err, read, read_gaussians};
 use crate::trainer::{History, TrainState, Trainer};
 
 /// Non-tensor part of a checkpoint.
@@ -71,7 +69,7 @@ pub fn save_checkpoint(dir: &Path, t: &Trainer) -> Result<(), TrainError> {
     let meta = HashMap::from([("step".to_owned(), s.step.to_string())]);
     let tpath = dir.join(CHECKPOINT_TENSORS);
     let bytes = ts.serialize(meta).map_err(|e| format_err(&tpath, e))?;
-    write_atomic(&tpath, &bytes)?;
+    gems_fs::write_atomic(&tpath, &bytes)?;
     let meta = CheckpointMeta {
         format: 1,
         step: s.step,
@@ -93,7 +91,7 @@ pub fn save_checkpoint(dir: &Path, t: &Trainer) -> Result<(), TrainError> {
         config: t.cfg.clone(),
     };
     let json = serde_json::to_vec(&meta).expect("checkpoint metadata serialises");
-    write_atomic(&dir.join(CHECKPOINT_JSON), &json)
+    Ok(gems_fs::write_atomic(&dir.join(CHECKPOINT_JSON), &json)?)
 }
 
 /// Whether `dir` holds a checkpoint.

@@ -55,7 +55,6 @@ pub use init::{PointCloud, from_points, random_in_frustums};
 pub use normalize::Normalization;
 pub use output::{MODEL_JSON, MODEL_TENSORS, TrainOutput, ViewResult};
 pub use prepare::{InitMode, prepare_input};
-pub use tensors::write_atomic;
 pub use trainer::{
     History, StepReport, TrainInput, TrainState, TrainView, Trainer, psnr, trajectory_of,
 };
@@ -80,6 +79,16 @@ pub enum TrainError {
     Splat(#[from] gems_splat::SplatError),
     #[error(transparent)]
     Gpu(#[from] gems_gpu::GpuError),
+}
+
+/// A failed atomic write (gems-fs) is an I/O error on the path it names.
+impl From<gems_fs::FsError> for TrainError {
+    fn from(e: gems_fs::FsError) -> Self {
+        TrainError::Io {
+            path: e.path,
+            source: e.source,
+        }
+    }
 }
 
 impl TrainError {

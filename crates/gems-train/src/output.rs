@@ -11,9 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::TrainError;
 use crate::config::TrainConfig;
 use crate::normalize::Normalization;
-use crate::tensors::{
-    TensorReader, TensorSet, add_gaussians, format_err, read, read_gaussians, write_atomic,
-};
+use crate::tensors::{TensorReader, TensorSet, add_gaussians, format_err, read, read_gaussians};
 use crate::trainer::{History, TrainView, Trainer};
 
 /// The trained trajectory of one training image (normalised frame, camera-to-world).
@@ -128,7 +126,7 @@ impl TrainOutput {
         let bytes = ts
             .serialize(HashMap::new())
             .map_err(|e| format_err(&tpath, e))?;
-        write_atomic(&tpath, &bytes)?;
+        gems_fs::write_atomic(&tpath, &bytes)?;
         let meta = OutputMeta {
             format: 1,
             config: self.config.clone(),
@@ -143,10 +141,10 @@ impl TrainOutput {
             steps: self.steps,
             pose_model: self.pose_model.clone(),
         };
-        write_atomic(
+        Ok(gems_fs::write_atomic(
             &dir.join(MODEL_JSON),
             &serde_json::to_vec_pretty(&meta).expect("output metadata serialises"),
-        )
+        )?)
     }
 
     /// Reads what [`TrainOutput::save`] wrote.

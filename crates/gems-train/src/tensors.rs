@@ -1,8 +1,7 @@
-//! The file plumbing of checkpoints and trained results: atomic writes, and named f32 tensors
-//! (Gaussians, Adam moments, knots) in safetensors files.
-//!
-//! Every file is written to a temporary file in the destination directory and renamed into
-//! place, so a crash never leaves a half-written file.
+//! The file plumbing of checkpoints and trained results: named f32 tensors (Gaussians, Adam
+//! moments, knots) in safetensors files. Every file is written with `gems_fs::write_atomic` (a
+//! temporary file in the destination directory renamed into place), so a crash never leaves a
+//! half-written file.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -11,17 +10,6 @@ use gems_splat::{Gaussians, SH_COEFFS};
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
 use crate::TrainError;
-
-/// Writes `bytes` to `path` atomically (gems-data's temporary file + rename).
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
-    gems_data::write_atomic(path, bytes).map_err(|e| match e {
-        gems_data::DataError::Io { path, source } => TrainError::Io { path, source },
-        other => TrainError::Format {
-            path: path.to_path_buf(),
-            reason: other.to_string(),
-        },
-    })
-}
 
 pub(crate) fn read(path: &Path) -> Result<Vec<u8>, TrainError> {
     std::fs::read(path).map_err(|e| TrainError::io(path, e))

@@ -172,9 +172,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let table = markdown(&rows, &args);
-    gems_data::write_atomic(&out.join("quality.md"), table.as_bytes())?;
+    gems_fs::write_atomic(&out.join("quality.md"), table.as_bytes())?;
     let json = serde_json::to_string_pretty(&rows)?;
-    gems_data::write_atomic(&out.join("quality.json"), json.as_bytes())?;
+    gems_fs::write_atomic(&out.join("quality.json"), json.as_bytes())?;
     println!("{table}");
     println!("written to {}", out.join("quality.md").display());
     Ok(())

@@ -46,7 +46,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     match args.format {
         Format::Ply => gems_splat::ply::write_ply(&file, &g)?,
-        Format::Splat => gems_data::write_atomic(&file, &gems_eval::viewer::splat_file(&g))
+        Format::Splat => gems_fs::write_atomic(&file, &gems_eval::viewer::splat_file(&g))
             .with_context(|| format!("writing {}", file.display()))?,
     }
     tracing::info!(gaussians = g.len(), "wrote {}", file.display());

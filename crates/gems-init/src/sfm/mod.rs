@@ -161,6 +161,16 @@ pub enum SfmError {
     Data(#[from] gems_data::DataError),
 }
 
+impl SfmError {
+    /// A failed atomic write (gems-fs), naming the file.
+    pub(crate) fn write(e: gems_fs::FsError) -> Self {
+        SfmError::Write {
+            path: e.path,
+            source: Box::new(e.source),
+        }
+    }
+}
+
 /// Shared SIMPLE_PINHOLE camera in full-resolution pixels.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct SfmCamera {

@@ -284,7 +284,7 @@ pub fn write_outputs(r: &SfmResult, out_dir: &Path) -> Result<(), SfmError> {
         path: out_dir.join("sfm_report.json"),
         source: Box::new(e),
     })?;
-    gems_data::write_atomic(&out_dir.join("sfm_report.json"), &json)?;
+    gems_fs::write_atomic(&out_dir.join("sfm_report.json"), &json).map_err(SfmError::write)?;
     let png_path = out_dir.join("sfm_topview.png");
     let img = draw_top_view(r, 800);
     let mut bytes = Vec::new();
@@ -296,6 +296,6 @@ pub fn write_outputs(r: &SfmResult, out_dir: &Path) -> Result<(), SfmError> {
         path: png_path.clone(),
         source: Box::new(e),
     })?;
-    gems_data::write_atomic(&png_path, &bytes)?;
+    gems_fs::write_atomic(&png_path, &bytes).map_err(SfmError::write)?;
     Ok(())
 }
