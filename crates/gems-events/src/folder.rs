@@ -86,15 +86,7 @@ pub fn list_frames(dir: &Path, unit: Option<TimeUnit>) -> Result<Vec<(i64, PathB
             frames.push((us, file));
         }
     } else {
-        let entries = std::fs::read_dir(dir).map_err(|e| EventError::io(dir, e))?;
-        for entry in entries {
-            let path = entry.map_err(|e| EventError::io(dir, e))?.path();
-            let ext = path
-                .extension()
-                .map(|e| e.to_string_lossy().to_ascii_lowercase());
-            if !matches!(ext.as_deref(), Some("png" | "jpg" | "jpeg")) {
-                continue;
-            }
+        for path in gems_fs::list_images(dir)? {
             if let Some(t) = path
                 .file_stem()
                 .and_then(|s| s.to_str())

@@ -88,36 +88,12 @@ impl EventError {
     }
 }
 
-/// Writes `bytes` produced by `fill` to `path` atomically: a temporary file in the same folder is
-/// written, flushed and renamed over `path`, so readers never see a half-written file.
-pub(crate) fn write_atomic(
-    path: &std::path::Path,
-    fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
-) -> Result<(), EventError> {
-    use std::io::Write;
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(std::path::Path::new("."));
-    let name = path
-        .file_name()
-        .ok_or_else(|| EventError::format(path, "not a file path"))?;
-    let tmp = dir.join(format!(
-        ".{}.tmp{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
-        let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
-        fill(&mut w)?;
-        w.flush()?;
-        w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(EventError::io(path, e));
+/// A failed atomic write (gems-fs) is an I/O error on the path it names.
+impl From<gems_fs::FsError> for EventError {
+    fn from(e: gems_fs::FsError) -> Self {
+        EventError::Io {
+            path: e.path,
+            source: e.source,
+        }
     }
-    Ok(())
 }

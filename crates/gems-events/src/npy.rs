@@ -379,7 +379,7 @@ pub(crate) fn read_npz_from<R: Read + Seek>(
 /// Writes `events` as an uncompressed `.npz` with `t` (int64 µs), `x`, `y` (uint16), `p` (int8 ±1),
 /// and `width`/`height` (uint16 scalars in 1-element arrays) — atomically.
 pub fn write_events_npz(path: &Path, events: &EventStream) -> Result<(), EventError> {
-    crate::write_atomic(path, |w| {
+    Ok(gems_fs::write_atomic_with(path, |w| {
         let mut npz = npyz::npz::NpzWriter::new(w);
         let opts = || {
             npyz::zip::write::FileOptions::default()
@@ -412,7 +412,7 @@ pub fn write_events_npz(path: &Path, events: &EventStream) -> Result<(), EventEr
             .finish()
             .map(|_| ())
             .map_err(std::io::Error::other)
-    })
+    })?)
 }
 
 /// Reads a signed count tensor `[views, bins, H, W]` (or `[views, bins, H·W]` when `size =
@@ -467,7 +467,7 @@ pub fn write_bin_counts(path: &Path, counts: &BinCounts) -> Result<(), EventErro
             "count tensor data does not match its shape".into(),
         ));
     }
-    crate::write_atomic(path, |w| {
+    Ok(gems_fs::write_atomic_with(path, |w| {
         let mut a = npyz::WriteOptions::<f32>::new()
             .default_dtype()
             .shape(&shape)
@@ -475,7 +475,7 @@ pub fn write_bin_counts(path: &Path, counts: &BinCounts) -> Result<(), EventErro
             .begin_nd()?;
         a.extend(counts.data.iter().copied())?;
         a.finish()
-    })
+    })?)
 }
 
 /// Shared by the npz reader: a time column unit conversion is exact for integers.

@@ -284,7 +284,7 @@ fn parse_time(f: &[u8], exp: i32) -> Option<i64> {
 /// Writes ECD-style text (`t[s] x y p`, p ∈ {0,1}, t with 6 decimals = exact µs) with a comment
 /// header recording the sensor size, atomically.
 pub fn write_events_text(path: &Path, events: &EventStream) -> Result<(), EventError> {
-    crate::write_atomic(path, |w| {
+    Ok(gems_fs::write_atomic_with(path, |w| {
         writeln!(
             w,
             "# gems events: t[s] x y p (1=on, 0=off); sensor {}x{}",
@@ -313,7 +313,7 @@ pub fn write_events_text(path: &Path, events: &EventStream) -> Result<(), EventE
             w.write_all(&line)?;
         }
         Ok(())
-    })
+    })?)
 }
 
 fn push_uint(out: &mut Vec<u8>, mut v: u64) {
