@@ -8,7 +8,7 @@
 //! Writing is binary little-endian and atomic (temporary file in the same directory + rename).
 
 use std::fmt;
-use std::io::{BufReader, BufWriter, Write};
+use std::io::BufReader;
 use std::path::Path;
 
 use serde::de::{self, Deserializer, IgnoredAny, MapAccess, Visitor};
@@ -281,17 +281,12 @@ pub fn write_ply(path: impl AsRef<Path>, g: &Gaussians) -> Result<(), SplatError
     let out = PlyOut {
         vertex: Rows { g, names, slots },
     };
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| err(e.to_string()))?;
-    {
-        let mut w = BufWriter::new(tmp.as_file());
-        serde_ply::to_writer(&out, serde_ply::SerializeOptions::binary_le(), &mut w)
-            .map_err(|e| err(e.to_string()))?;
-        w.flush().map_err(|e| err(e.to_string()))?;
-    }
-    tmp.persist(path).map_err(|e| err(e.error.to_string()))?;
-    Ok(())
+    gems_fs::write_atomic_with(path, |w| {
+        serde_ply::to_writer(&out, serde_ply::SerializeOptions::binary_le(), w)
+            .map_err(std::io::Error::other)
+    })
+    .map_err(|e| SplatError::Ply {
+        path: e.path,
+        reason: e.source.to_string(),
+    })
 }

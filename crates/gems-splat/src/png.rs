@@ -5,7 +5,8 @@ use std::path::Path;
 use crate::{RenderOutput, SplatError};
 
 /// Writes camera `camera` of `out` as an 8-bit RGB PNG (values clamped to [0, 1], rounded),
-/// atomically: a temporary file in the same directory is renamed over `path`.
+/// atomically (`gems_fs::write_atomic_with`: a temporary file in the same directory is renamed
+/// over `path`).
 pub fn write_png(
     path: impl AsRef<Path>,
     out: &RenderOutput,
@@ -30,16 +31,12 @@ pub fn write_png(
         .collect();
     let img = image::RgbImage::from_raw(out.width, out.height, bytes)
         .ok_or_else(|| err("image buffer has the wrong size".into()))?;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let tmp = tempfile::Builder::new()
-        .suffix(".png")
-        .tempfile_in(dir)
-        .map_err(|e| err(e.to_string()))?;
-    img.save_with_format(tmp.path(), image::ImageFormat::Png)
-        .map_err(|e| err(e.to_string()))?;
-    tmp.persist(path).map_err(|e| err(e.error.to_string()))?;
-    Ok(())
+    gems_fs::write_atomic_with(path, |w| {
+        img.write_to(w, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+    .map_err(|e| SplatError::Image {
+        path: e.path,
+        reason: e.source.to_string(),
+    })
 }
