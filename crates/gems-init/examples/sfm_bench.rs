@@ -4,8 +4,8 @@
 //! Usage: sfm_bench <work_dir> <seed>... [--no-colmap] [--width W --height H --blur PX]
 //! Prints one markdown row per (seed, level, method) and a JSON line per result.
 
-use gems_init::sfm::{ColmapCliOptions, SfmImage, SfmOptions, run_colmap_cli, run_sfm};
-use std::path::{Path, PathBuf};
+use gems_init::sfm::{ColmapCliOptions, SfmOptions, load_images, run_colmap_cli, run_sfm};
+use std::path::PathBuf;
 
 struct Outcome {
     registered: usize,
@@ -36,21 +36,6 @@ fn rmse_fraction(est: &[[f64; 3]], gt: &[[f64; 3]], gt_all: &[[f64; 3]]) -> Opti
         }
     }
     Some(mse.sqrt() / extent)
-}
-
-fn load_images(dir: &Path) -> Vec<SfmImage> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    files.sort();
-    files
-        .iter()
-        .map(|p| SfmImage {
-            name: p.file_name().unwrap().to_string_lossy().into_owned(),
-            image: image::open(p).unwrap().to_rgb8(),
-        })
-        .collect()
 }
 
 fn main() {
@@ -97,7 +82,7 @@ fn main() {
         for (li, level) in [1, 3, 5, 7, 9, 11].into_iter().enumerate() {
             let ld = dir.join(format!("blur_{level:02}"));
             let rows = gems_data::llff::read_poses_bounds(&ld.join("poses_bounds.npy")).unwrap();
-            let images = load_images(&ld.join("images"));
+            let images = load_images(&ld).unwrap();
             let gt: Vec<[f64; 3]> = rows.iter().map(|r| r.pose().center()).collect();
             let blur = blurs.get(li).copied().unwrap_or(f64::NAN);
             // gems sfm, focal estimated and focal from the scene metadata (hwf of poses_bounds).

@@ -158,13 +158,10 @@ pub fn run_colmap_cli(
     })
 }
 
+/// The size of the first image of `dir` (gems-fs's listing, in name order) whose header reads:
+/// it sets the principal point given to COLMAP with a known focal.
 fn first_image_size(dir: &Path) -> Result<(u32, u32), SfmError> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| SfmError::Colmap(format!("{}: {e}", dir.display())))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file())
-        .collect();
-    files.sort();
+    let files = gems_fs::list_images(dir).map_err(|e| SfmError::Colmap(e.to_string()))?;
     for f in files {
         if let Ok(d) = image::image_dimensions(&f) {
             return Ok(d);

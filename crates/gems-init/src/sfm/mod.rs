@@ -249,28 +249,18 @@ pub(crate) struct PairMatches {
 }
 
 /// The images of a scene folder: `<dir>/images/*` when that folder exists, else `<dir>/*`
-/// (png/jpg/jpeg), sorted by file name.
+/// (png/jpg/jpeg, not hidden), sorted by file name: the listing gems-data opens scenes with
+/// (`gems_fs::list_images`), so the SfM model names the images the trainer reads.
 pub fn load_images(dir: &std::path::Path) -> Result<Vec<SfmImage>, SfmError> {
     let img_dir = if dir.join("images").is_dir() {
         dir.join("images")
     } else {
         dir.to_path_buf()
     };
-    let read_err = |e: std::io::Error| SfmError::Read {
-        path: img_dir.clone(),
-        source: Box::new(e),
-    };
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&img_dir)
-        .map_err(read_err)?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.is_file()
-                && p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
-                    matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg")
-                })
-        })
-        .collect();
-    files.sort();
+    let files = gems_fs::list_images(&img_dir).map_err(|e| SfmError::Read {
+        path: e.path,
+        source: Box::new(e.source),
+    })?;
     if files.is_empty() {
         return Err(SfmError::TooFewImages(0));
     }
