@@ -59,7 +59,7 @@ fn run_cpu(h: usize, w: usize, n: usize, lambda: f32, renders: &[f32], target: &
         .flat_map(|_| d_blurred.iter().map(|d| d * inv_n))
         .collect();
     CpuOut {
-        psnr: gems_train::psnr(&blurred, target),
+        psnr: gems_metrics::psnr_capped(&blurred, target),
         blurred,
         d_blurred,
         d_renders,

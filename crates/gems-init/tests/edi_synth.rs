@@ -7,17 +7,8 @@
 //!   `deblur_scene` reproduces the in-memory EDI, and `write_edi_scene` writes a readable scene.
 
 use gems_init::edi::*;
+use gems_metrics::psnr_capped;
 use gems_synth::{SynthConfig, SynthScene, V3, linear_to_srgb};
-
-fn psnr(a: &[f32], b: &[f32]) -> f64 {
-    let mse: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(&x, &y)| f64::from(x - y).powi(2))
-        .sum::<f64>()
-        / a.len() as f64;
-    -10.0 * mse.log10()
-}
 
 /// Mean of the three channels.
 fn gray(d: &[f32]) -> Vec<f32> {
@@ -140,13 +131,13 @@ fn measure(sc: &SynthScene, views: &[usize], with_oracle: bool) -> Gains {
         let img = Image::new(w, h, 3, blurry.clone()).unwrap();
         let edi = edi_exact(&img, &pe, (t0 + t1) / 2, th, &synth_cfg()).unwrap();
         for (acc, out) in [(&mut g.blurry, &blurry), (&mut g.edi, &edi.data)] {
-            acc[0] += psnr(out, &gt) / n;
-            acc[1] += psnr(&gray(out), &gray(&gt)) / n;
+            acc[0] += f64::from(psnr_capped(out, &gt)) / n;
+            acc[1] += f64::from(psnr_capped(&gray(out), &gray(&gt))) / n;
         }
         if with_oracle {
             let o = oracle(sc, v, &blurry);
-            g.oracle[0] += psnr(&o, &gt) / n;
-            g.oracle[1] += psnr(&gray(&o), &gray(&gt)) / n;
+            g.oracle[0] += f64::from(psnr_capped(&o, &gt)) / n;
+            g.oracle[1] += f64::from(psnr_capped(&gray(&o), &gray(&gt))) / n;
         }
     }
     g
@@ -247,8 +238,8 @@ fn tiny_scene_files_match_the_simulator_and_write_a_readable_scene() {
         let Some(gt) = &v.sharp_gt else { continue };
         let gt = gems_data::load_image(gt).unwrap();
         let blurry = gems_data::load_image(&v.image).unwrap();
-        p_blur += psnr(&blurry.data, &gt.data);
-        p_edi += psnr(&e.frames[0].data, &gt.data);
+        p_blur += f64::from(psnr_capped(&blurry.data, &gt.data));
+        p_edi += f64::from(psnr_capped(&e.frames[0].data, &gt.data));
         n += 1;
     }
     let (p_blur, p_edi) = (p_blur / n as f64, p_edi / n as f64);

@@ -1,6 +1,7 @@
 //! Image metrics for gems. Images are interleaved RGB `f32` in [0, 1], laid out [H, W, 3].
 //!
-//! - [`psnr`]: data range 1, inputs clamped (torchmetrics `PeakSignalNoiseRatio(data_range=1)`).
+//! - [`psnr`]: data range 1, inputs clamped (torchmetrics `PeakSignalNoiseRatio(data_range=1)`);
+//!   [`psnr_capped`] is the same without the shape check, capped at 200 dB (the trainer's log).
 //! - [`ssim`]: the evaluation SSIM, torchmetrics `StructuralSimilarityIndexMeasure(data_range=1)`
 //!   (Gaussian 11×11, σ 1.5, K1 0.01, K2 0.03, reflect padding, mean over the full map).
 //! - [`ssim_valid`] / [`ssim_valid_with_grad`]: the training-loss SSIM of fused-ssim with
@@ -15,7 +16,7 @@ mod psnr;
 mod ssim;
 
 pub use lpips::{Lpips, LpipsError};
-pub use psnr::psnr;
+pub use psnr::{psnr, psnr_capped};
 pub use ssim::{LossValue, TrainingLoss, ssim, ssim_valid, ssim_valid_with_grad};
 
 /// Errors of the image metrics.

@@ -9,9 +9,10 @@ mod common;
 
 use gems_gpu::DeviceChoice;
 use gems_gpu::Engine;
+use gems_metrics::psnr_capped;
 use gems_train::Normalization;
 use gems_train::TrainConfig;
-use gems_train::{TrainInput, Trainer, psnr};
+use gems_train::{TrainInput, Trainer};
 use gems_train::{load_checkpoint, save_checkpoint};
 
 /// 60 steps with refinement (relocation + growth) at steps 6, 26 and 46.
@@ -72,7 +73,7 @@ fn fit_psnr(t: &mut Trainer) -> f32 {
                 *b += x / poses.len() as f32;
             }
         }
-        sum += psnr(&blurred, &t.views()[v].image);
+        sum += psnr_capped(&blurred, &t.views()[v].image);
     }
     sum / n as f32
 }
