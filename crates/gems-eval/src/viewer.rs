@@ -11,6 +11,7 @@
 
 use std::fmt::Write as _;
 
+use gems_splat::activation::sigmoid;
 use gems_splat::{Camera, Gaussians};
 
 /// What a camera button of the viewer is.
@@ -53,10 +54,6 @@ pub const MAX_SPLATS: usize = 29_000_000 * 3 / 4 / PAGE_BYTES_PER_SPLAT;
 
 const VIEWER_JS: &str = include_str!("../viewer/viewer.js");
 const SH_C0: f32 = 0.282_094_8;
-
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
-}
 
 /// How visible Gaussian `i` is: opacity × its largest projected area over the cameras (the two
 /// largest scales over the squared depth), or opacity × the area of its two largest scales when

@@ -8,6 +8,7 @@ use common::{ctx, gaussians};
 use gems_gpu::rng::{NOISE_STREAM, counter_of, key_of, normal3, philox4x32_10};
 use gems_gpu::{GpuGaussians, GpuMcmc, Group, GroupMoments, NoiseParams, buffers};
 use gems_splat::Gaussians;
+use gems_splat::activation::{logit, sigmoid_f64};
 use gems_train::adam::GaussianAdam;
 use gems_train::mcmc::{
     BinomialTable, add_new, apply_noise, growth_draws, relocate_dead, relocation_draws,
@@ -16,10 +17,6 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 const MIN_OPACITY: f32 = 0.005;
-
-fn logit(p: f32) -> f32 {
-    (p / (1.0 - p)).ln()
-}
 
 #[test]
 fn philox_matches_random123_known_answers() {
@@ -167,7 +164,7 @@ fn philox_noise_statistics_are_standard_normal() {
         g.log_scales[i] = [0.0; 3];
         g.opacity_logits[i] = -40.0;
     }
-    let gate = 1.0 / (1.0 + (-0.5f64).exp());
+    let gate = sigmoid_f64(0.5);
     let out = philox_noise(&g, 42, 1000, 1.0);
     let eps: Vec<f64> = out
         .means
@@ -277,7 +274,6 @@ fn compare(gpu: &GpuGaussians, cpu: &Gaussians, adam: &GaussianAdam, before: &Ga
         assert_eq!(mom.m, s.m, "{group:?} m");
         assert_eq!(mom.v, s.v, "{group:?} v");
     }
-    let sig = |l: f32| 1.0 / (1.0 + (-(l as f64)).exp());
     let (mut worst_o, mut worst_s) = (0.0f64, 0.0f64);
     for i in 0..cpu.len() {
         let unchanged = i < before.len()
@@ -289,7 +285,10 @@ fn compare(gpu: &GpuGaussians, cpu: &Gaussians, adam: &GaussianAdam, before: &Ga
             assert_eq!(out.log_scales[i], cpu.log_scales[i], "row {i}");
             continue;
         }
-        let (og, oc) = (sig(out.opacity_logits[i]), sig(cpu.opacity_logits[i]));
+        let (og, oc) = (
+            sigmoid_f64(out.opacity_logits[i] as f64),
+            sigmoid_f64(cpu.opacity_logits[i] as f64),
+        );
         worst_o = worst_o.max((og - oc).abs() / oc);
         for a in 0..3 {
             // |Δ ln s| is the relative error of s.

@@ -7,6 +7,7 @@ mod common;
 use common::{ctx, gaussians, values};
 use gems_gpu::{GpuGaussians, GpuGradients, GpuRegularizers};
 use gems_splat::Gaussians;
+use gems_splat::activation::sigmoid_f64;
 
 const OR: f64 = 0.01;
 const SR: f64 = 0.01;
@@ -16,7 +17,7 @@ fn reference(g: &Gaussians) -> f64 {
     let o: f64 = g
         .opacity_logits
         .iter()
-        .map(|&l| 1.0 / (1.0 + (-(l as f64)).exp()))
+        .map(|&l| sigmoid_f64(l as f64))
         .sum();
     let s: f64 = g
         .log_scales
@@ -65,7 +66,7 @@ fn value_and_gradients_match_the_f64_reference() {
     // of the (≤ 1e-5) regulariser term, i.e. ~1e-11 absolute.
     let mut worst = 0.0f64;
     for i in 0..n {
-        let o = 1.0 / (1.0 + (-(g.opacity_logits[i] as f64)).exp());
+        let o = sigmoid_f64(g.opacity_logits[i] as f64);
         let want = base.opacity_logits[i] as f64 + OR * o * (1.0 - o) / n as f64;
         worst = worst.max((go[i] as f64 - want).abs());
         for a in 0..3 {

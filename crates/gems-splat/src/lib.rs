@@ -19,6 +19,7 @@
 //! * [`reference`] — a slow, dense, f64 renderer with the same semantics; the fast path and
 //!   the gsplat test vectors are checked against it and it is checked by finite differences.
 //! * [`ply`] — Inria-layout PLY read/write (opens in common splat viewers).
+//! * [`activation`] — the opacity logit ↔ opacity maps (`sigmoid`, `logit`).
 //! * [`write_png`] — one camera of a [`RenderOutput`] as an 8-bit PNG, written atomically.
 //!
 //! Per-(camera, Gaussian) projection, SH colour and their backward are computed in f64 by one
@@ -29,6 +30,7 @@
 // Small fixed-size matrix and channel loops read best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
+pub mod activation;
 pub mod ply;
 mod png;
 mod project;

@@ -79,7 +79,7 @@ pub(crate) fn prepare(g: &Gaussians, i: usize) -> Option<Prep> {
     }
     Some(Prep {
         cov,
-        opacity: sigmoid(logit),
+        opacity: crate::activation::sigmoid_f64(logit),
     })
 }
 
@@ -453,10 +453,6 @@ pub(crate) fn cov_backward(
     let dot: f64 = (0..4).map(|k| v_qn[k] * qn[k]).sum();
     let v_q = [0, 1, 2, 3].map(|k| (v_qn[k] - dot * qn[k]) / n);
     (v_q, v_ls)
-}
-
-pub(crate) fn sigmoid(x: f64) -> f64 {
-    1.0 / (1.0 + (-x).exp())
 }
 
 pub(crate) fn quat_to_rot(q: [f64; 4]) -> Mat3 {

@@ -50,10 +50,6 @@ pub fn knn_rms_distance(points: &[[f32; 3]], k: usize) -> Result<Vec<f32>, Train
         .collect())
 }
 
-fn logit(p: f32) -> f32 {
-    (p / (1.0 - p)).ln()
-}
-
 /// Gaussians at `points` with colours `colors` (RGB in [0, 1]).
 pub fn from_points<R: Rng + ?Sized>(
     points: &[[f32; 3]],
@@ -71,7 +67,7 @@ pub fn from_points<R: Rng + ?Sized>(
     }
     let dist = knn_rms_distance(points, cfg.knn)?;
     let mut g = Gaussians::with_degree(sh_degree);
-    let opacity = logit(cfg.opacity);
+    let opacity = gems_splat::activation::logit(cfg.opacity);
     for ((p, c), d) in points.iter().zip(colors).zip(&dist) {
         let mut sh = [[0.0f32; 3]; SH_COEFFS];
         sh[0] = c.map(|v| (v - 0.5) / SH_C0);

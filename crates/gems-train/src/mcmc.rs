@@ -16,6 +16,7 @@
 //! decayed means lr).
 
 use gems_splat::Gaussians;
+use gems_splat::activation::{logit, sigmoid};
 use rand::Rng;
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
@@ -95,14 +96,6 @@ pub fn multinomial_with_replacement<R: Rng + ?Sized>(
             cdf.partition_point(|&c| c <= x).min(weights.len() - 1)
         })
         .collect()
-}
-
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
-}
-
-fn logit(p: f32) -> f32 {
-    (p / (1.0 - p)).ln()
 }
 
 /// Splits each distinct source into (count + 1) copies in place: new o' and s' written to the

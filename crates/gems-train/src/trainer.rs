@@ -779,7 +779,7 @@ fn add_regularizers(cfg: &TrainConfig, g: &Gaussians, grads: &mut Gradients) -> 
     let (or, sr) = (cfg.mcmc.opacity_reg, cfg.mcmc.scale_reg);
     let mut value = 0.0f64;
     for (i, &l) in g.opacity_logits.iter().enumerate() {
-        let s = 1.0 / (1.0 + (-l).exp());
+        let s = gems_splat::activation::sigmoid(l);
         value += (or * s) as f64 / n as f64;
         grads.opacity_logits[i] += or * s * (1.0 - s) / n as f32;
     }
