@@ -12,6 +12,7 @@
 use std::fmt::Write as _;
 
 use gems_splat::activation::sigmoid;
+use gems_splat::sh::C0;
 use gems_splat::{Camera, Gaussians};
 
 /// What a camera button of the viewer is.
@@ -53,7 +54,6 @@ pub const PAGE_BYTES_PER_SPLAT: usize = 32 + 9;
 pub const MAX_SPLATS: usize = 29_000_000 * 3 / 4 / PAGE_BYTES_PER_SPLAT;
 
 const VIEWER_JS: &str = include_str!("../viewer/viewer.js");
-const SH_C0: f32 = 0.282_094_8;
 
 /// How visible Gaussian `i` is: opacity × its largest projected area over the cameras (the two
 /// largest scales over the squared depth), or opacity × the area of its two largest scales when
@@ -103,7 +103,7 @@ pub fn splat_record(g: &Gaussians, i: usize, out: &mut Vec<u8>) {
     }
     let u8c = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
     for c in 0..3 {
-        out.push(u8c(0.5 + SH_C0 * g.sh[i][0][c]));
+        out.push(u8c(0.5 + C0 as f32 * g.sh[i][0][c]));
     }
     out.push(u8c(sigmoid(g.opacity_logits[i])));
     let q = g.quats[i];

@@ -20,6 +20,7 @@
 //!   the gsplat test vectors are checked against it and it is checked by finite differences.
 //! * [`ply`] — Inria-layout PLY read/write (opens in common splat viewers).
 //! * [`activation`] — the opacity logit ↔ opacity maps (`sigmoid`, `logit`).
+//! * [`sh`] — the real SH basis ([`sh::basis`], [`sh::C0`]) colours are evaluated with.
 //! * [`write_png`] — one camera of a [`RenderOutput`] as an 8-bit PNG, written atomically.
 //!
 //! Per-(camera, Gaussian) projection, SH colour and their backward are computed in f64 by one
@@ -36,7 +37,7 @@ mod png;
 mod project;
 mod raster;
 pub mod reference;
-mod sh;
+pub mod sh;
 
 pub use png::write_png;
 pub use raster::Renderer;

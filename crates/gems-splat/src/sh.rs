@@ -1,7 +1,8 @@
 //! Real spherical harmonics up to degree 3 (Sloan's "efficient SH" basis, gsplat's order and
 //! signs), evaluated on a normalised direction, with the backward to the unnormalised direction.
 
-const C0: f64 = 0.282_094_791_773_878_14;
+/// The band-0 basis value 1/(2√π): a colour's SH dc coefficient is (rgb − 0.5) / C0.
+pub const C0: f64 = 0.282_094_791_773_878_14;
 const C1: f64 = 0.488_602_511_902_919_9;
 const C2: [f64; 5] = [
     0.546_274_215_296_039_5,
@@ -12,14 +13,10 @@ const C2: [f64; 5] = [
 ];
 const C2_OFFSET: f64 = -0.315_391_565_252_520_1;
 
-/// Basis values for `k < (degree+1)²` at the unit direction `d`, and their derivatives w.r.t. the
-/// three components of `d` (treated as independent variables) when `deriv` is given.
-pub(crate) fn basis(
-    degree: u32,
-    d: [f64; 3],
-    out: &mut [f64; 16],
-    deriv: Option<&mut [[f64; 3]; 16]>,
-) {
+/// Basis values for `k < (degree+1)²` at the unit direction `d` (the rest of `out` is zeroed),
+/// and their derivatives w.r.t. the three components of `d` (treated as independent variables)
+/// when `deriv` is given. The renderer's colour and gems-train's SH rotation both use it.
+pub fn basis(degree: u32, d: [f64; 3], out: &mut [f64; 16], deriv: Option<&mut [[f64; 3]; 16]>) {
     let [x, y, z] = d;
     *out = [0.0; 16];
     out[0] = C0;

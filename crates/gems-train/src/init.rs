@@ -7,6 +7,7 @@
 
 use std::num::NonZeroUsize;
 
+use gems_splat::sh::C0;
 use gems_splat::{Camera, Gaussians, SH_COEFFS};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rand::{Rng, RngExt};
@@ -15,9 +16,6 @@ use rayon::prelude::*;
 
 use crate::TrainError;
 use crate::config::InitConfig;
-
-/// Zeroth-order SH constant.
-pub const SH_C0: f32 = 0.282_094_8;
 
 /// Smallest mean squared neighbour distance (keeps duplicate points from getting log(0)).
 const MIN_SQ_DIST: f32 = 1e-7;
@@ -70,7 +68,7 @@ pub fn from_points<R: Rng + ?Sized>(
     let opacity = gems_splat::activation::logit(cfg.opacity);
     for ((p, c), d) in points.iter().zip(colors).zip(&dist) {
         let mut sh = [[0.0f32; 3]; SH_COEFFS];
-        sh[0] = c.map(|v| (v - 0.5) / SH_C0);
+        sh[0] = c.map(|v| (v - 0.5) / C0 as f32);
         let quat: [f32; 4] = std::array::from_fn(|_| rng.random::<f32>());
         g.push(*p, quat, [(cfg.scale_factor * d).ln(); 3], opacity, sh);
     }
@@ -183,7 +181,7 @@ mod tests {
         let want = (0.1f32 * (14.0f32 / 3.0).sqrt()).ln();
         assert!((g.log_scales[0][0] - want).abs() < 1e-5);
         assert!(g.opacity_logits[0].abs() < 1e-6, "logit(0.5) = 0");
-        assert!((g.sh[0][0][0] * SH_C0 + 0.5 - 1.0).abs() < 1e-5);
+        assert!((g.sh[0][0][0] * C0 as f32 + 0.5 - 1.0).abs() < 1e-5);
         assert_eq!(g.sh[0][1], [0.0; 3]);
         assert!(from_points(&pts, &cols[..2], &InitConfig::default(), 3, &mut rng).is_err());
         assert!(knn_rms_distance(&pts[..1], 3).is_err());

@@ -141,36 +141,15 @@ impl Normalization {
     }
 }
 
-/// Real SH basis (gsplat constants and index order) of bands 1..=3 at unit direction d.
-fn sh_basis(d: &Vector3<f64>) -> [f64; 15] {
-    let (x, y, z) = (d.x, d.y, d.z);
-    let (xx, yy, zz) = (x * x, y * y, z * z);
-    let f_c1 = xx - yy;
-    let f_s1 = 2.0 * x * y;
-    let f_c2 = x * f_c1 - y * f_s1;
-    let f_s2 = x * f_s1 + y * f_c1;
-    let a = -2.285228997322329 * zz + 0.4570457994644658;
-    let b = 1.445305721320277 * z;
-    [
-        -0.48860251190292 * y,
-        0.48860251190292 * z,
-        -0.48860251190292 * x,
-        0.5462742152960395 * 2.0 * x * y,
-        -1.092548430592079 * z * y,
-        0.9461746957575601 * zz - 0.3153915652525201,
-        -1.092548430592079 * z * x,
-        0.5462742152960395 * (xx - yy),
-        -0.5900435899266435 * f_s2,
-        b * f_s1,
-        a * y,
-        z * (1.865881662950577 * zz - 1.119528997770346),
-        a * x,
-        b * f_c1,
-        -0.5900435899266435 * f_c2,
-    ]
+/// The real SH basis of degree 3 at unit direction `d` (gems-splat's: gsplat's constants, order
+/// and signs); index 0 is band 0, then bands 1..=3.
+fn sh_basis(d: &Vector3<f64>) -> [f64; 16] {
+    let mut y = [0.0; 16];
+    gems_splat::sh::basis(3, [d.x, d.y, d.z], &mut y, None);
+    y
 }
 
-/// Band offsets within the 15 non-dc coefficients.
+/// Band offsets within the 15 non-dc coefficients (basis and SH index 1 + offset).
 const BANDS: [(usize, usize); 3] = [(0, 3), (3, 5), (8, 7)];
 
 /// For each band l, the matrix T with c_new = T c_old such that
@@ -188,9 +167,11 @@ fn sh_band_rotations(rt: &Matrix3<f64>) -> [DMatrix<f64>; 3] {
             Vector3::new(r * phi.cos(), r * phi.sin(), zc)
         })
         .collect();
+    let ya: Vec<[f64; 16]> = dirs.iter().map(sh_basis).collect();
+    let yb: Vec<[f64; 16]> = dirs.iter().map(|d| sh_basis(&(q * d))).collect();
     BANDS.map(|(off, len)| {
-        let a = DMatrix::from_fn(k, len, |i, j| sh_basis(&dirs[i])[off + j]);
-        let b = DMatrix::from_fn(k, len, |i, j| sh_basis(&(q * dirs[i]))[off + j]);
+        let a = DMatrix::from_fn(k, len, |i, j| ya[i][1 + off + j]);
+        let b = DMatrix::from_fn(k, len, |i, j| yb[i][1 + off + j]);
         // Y_old(Q d) = M Y(d) row-wise: B = A Mᵀ; then c_new = Mᵀ c_old.
         let mt = a
             .svd(true, true)
@@ -285,7 +266,7 @@ mod tests {
     /// Colour of SH coefficients (bands 1..3 only) in direction d.
     fn sh_eval(sh: &[[f32; 3]; 16], d: &Vector3<f64>, ch: usize) -> f64 {
         let y = sh_basis(d);
-        (0..15).map(|k| y[k] * sh[k + 1][ch] as f64).sum()
+        (1..16).map(|k| y[k] * sh[k][ch] as f64).sum()
     }
 
     #[test]
