@@ -22,7 +22,7 @@ use rand_distr::{Distribution, Normal};
 use crate::TrainError;
 use crate::config::TopUp;
 use crate::config::TrainConfig;
-use crate::init::{from_points, near_points, random_in_frustums};
+use crate::init::{PointCloud, from_points, near_points, random_in_frustums};
 use crate::normalize::Normalization;
 use crate::trainer::{TrainInput, TrainView};
 
@@ -134,13 +134,47 @@ fn depth_range(points: &[[f32; 3]], cams: &[Camera]) -> Option<(f32, f32)> {
     (far > near && near > 0.0).then_some((near, far))
 }
 
-/// Builds the training input of `scene` for `mode`.
+/// Builds the training input of `scene` for `mode`, step by step: the sparse model the poses
+/// (and points) come from, each view's image and initial pose, the PRISM3D normalisation, the
+/// optional pose noise, the scene scale, then the initial Gaussians. The seeded generator is
+/// drawn from in that order (noise, then points), so a seed gives one input.
 pub fn prepare_input(
     scene: &Scene,
     mode: &InitMode,
     cfg: &TrainConfig,
 ) -> Result<TrainInput, TrainError> {
-    let model = match mode {
+    let model = initial_model(scene, mode)?;
+    let raw = read_views(scene, mode, model.as_ref())?;
+    let poses: Vec<(Matrix3<f64>, Vector3<f64>)> =
+        raw.iter().map(|r| (r.c2w.rot, r.c2w.trans)).collect();
+    let norm = if cfg.normalize.enabled {
+        Normalization::from_cameras(&poses, cfg.normalize.scale_factor)
+    } else {
+        Normalization::identity()
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x006e_6f69_7365);
+    let views = normalised_views(raw, mode, &norm, &mut rng)?;
+    let scene_scale = scene_scale(&views, cfg.normalize.scene_scale_margin);
+    let cams: Vec<_> = views
+        .iter()
+        .map(|v| Camera::from_c2w(&v.intrinsics, &v.c2w_init))
+        .collect();
+    let (points, colors) =
+        initial_points(model.as_ref(), &norm, &cams, cfg, scene_scale, &mut rng)?;
+    let gaussians = from_points(&points, &colors, &cfg.init, cfg.sh_degree, &mut rng)?;
+    Ok(TrainInput {
+        views,
+        gaussians,
+        normalization: norm,
+        scene_scale,
+        init_label: mode.label(),
+    })
+}
+
+/// The sparse model the run starts from: the given or the scene's COLMAP model, or for
+/// ground-truth modes the scene's `gt/sparse/0` when it has one (for its points).
+fn initial_model(scene: &Scene, mode: &InitMode) -> Result<Option<SparseModel>, TrainError> {
+    Ok(match mode {
         InitMode::Colmap(Some(dir)) => Some(load_model(dir)?),
         InitMode::Colmap(None) => Some(scene.sfm.clone().ok_or_else(|| {
             TrainError::Input(format!(
@@ -156,7 +190,16 @@ pub fn prepare_input(
                 None
             }
         }
-    };
+    })
+}
+
+/// Each training view's image, intrinsics and initial pose (input frame) for `mode`. Views the
+/// model did not register are named in a warning and left out; no view at all is an error.
+fn read_views(
+    scene: &Scene,
+    mode: &InitMode,
+    model: Option<&SparseModel>,
+) -> Result<Vec<RawView>, TrainError> {
     let mut raw = Vec::new();
     // Views an SfM model did not register cannot be trained on; they are named, never dropped
     // silently (their SfM report lists them too).
@@ -164,7 +207,7 @@ pub fn prepare_input(
     for v in scene.train_views() {
         let (pose, k) = match mode {
             InitMode::Colmap(Some(_)) => {
-                let m = model.as_ref().expect("colmap mode loads a model");
+                let m = model.expect("colmap mode loads a model");
                 let Some(img) = m.image_by_name(&v.name) else {
                     unregistered.push(v.name.clone());
                     continue;
@@ -243,18 +286,21 @@ pub fn prepare_input(
         )));
     }
 
-    let poses: Vec<(Matrix3<f64>, Vector3<f64>)> =
-        raw.iter().map(|r| (r.c2w.rot, r.c2w.trans)).collect();
-    let norm = if cfg.normalize.enabled {
-        Normalization::from_cameras(&poses, cfg.normalize.scale_factor)
-    } else {
-        Normalization::identity()
-    };
+    Ok(raw)
+}
+
+/// The views in the normalised frame, with seeded SE(3) noise on the initial pose for
+/// [`InitMode::GtNoisy`].
+fn normalised_views(
+    raw: Vec<RawView>,
+    mode: &InitMode,
+    norm: &Normalization,
+    rng: &mut ChaCha8Rng,
+) -> Result<Vec<TrainView>, TrainError> {
     let to_norm = |p: &Se3| {
         let (r, t) = norm.apply_c2w(&p.rot, &p.trans);
         Se3::new(r, t)
     };
-    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x006e_6f69_7365);
     let mut views = Vec::with_capacity(raw.len());
     for RawView {
         name,
@@ -277,9 +323,9 @@ pub fn prepare_input(
                 Normal::new(0.0, *rotation_std).map_err(|e| TrainError::Config(e.to_string()))?;
             let xi = Vector6::from_fn(|i, _| {
                 if i < 3 {
-                    nt.sample(&mut rng)
+                    nt.sample(rng)
                 } else {
-                    nr.sample(&mut rng)
+                    nr.sample(rng)
                 }
             });
             c2w_init = c2w_init * Se3::exp(&xi);
@@ -293,6 +339,11 @@ pub fn prepare_input(
             c2w_gt_subframes: gt_subframes.iter().map(to_norm).collect(),
         });
     }
+    Ok(views)
+}
+
+/// The scene scale: `margin` × the largest distance of a camera centre from their mean.
+fn scene_scale(views: &[TrainView], margin: f64) -> f32 {
     let centre = views
         .iter()
         .fold(Vector3::zeros(), |a, v| a + v.c2w_init.trans)
@@ -301,18 +352,25 @@ pub fn prepare_input(
         .iter()
         .map(|v| (v.c2w_init.trans - centre).norm())
         .fold(0.0, f64::max);
-    let scene_scale = (cfg.normalize.scene_scale_margin * max_dist).max(1e-6) as f32;
+    (margin * max_dist).max(1e-6) as f32
+}
 
-    let cams: Vec<_> = views
-        .iter()
-        .map(|v| Camera::from_c2w(&v.intrinsics, &v.c2w_init))
-        .collect();
+/// The initial point cloud (normalised frame) and colours: the model's points, topped up when
+/// there are fewer than `init.min_points`, else random points in the camera frustums.
+fn initial_points(
+    model: Option<&SparseModel>,
+    norm: &Normalization,
+    cams: &[Camera],
+    cfg: &TrainConfig,
+    scene_scale: f32,
+    rng: &mut ChaCha8Rng,
+) -> Result<PointCloud, TrainError> {
     // MCMC never removes Gaussians, so an initial cloud above its cap would stay above it.
     let (min_points, random_points) = (
         cfg.init.min_points.min(cfg.mcmc.cap_max),
         cfg.init.random_points.min(cfg.mcmc.cap_max),
     );
-    let (points, colors) = match model.as_ref().map(read_points) {
+    Ok(match model.map(read_points) {
         Some((p, c)) if p.len() >= 2 => {
             let mut p: Vec<[f32; 3]> = p
                 .iter()
@@ -323,7 +381,7 @@ pub fn prepare_input(
                 .collect();
             let mut c = c;
             if p.len() < min_points {
-                let (near, far) = depth_range(&p, &cams).unwrap_or((
+                let (near, far) = depth_range(&p, cams).unwrap_or((
                     cfg.init.random_near * scene_scale,
                     cfg.init.random_far * scene_scale,
                 ));
@@ -337,8 +395,8 @@ pub fn prepare_input(
                     "sparse SfM cloud: adding points"
                 );
                 let (rp, rc) = match cfg.init.top_up {
-                    TopUp::Frustums => random_in_frustums(&cams, extra, near, far, &mut rng)?,
-                    TopUp::NearPoints => near_points(&p, &c, cfg.init.knn, extra, &mut rng)?,
+                    TopUp::Frustums => random_in_frustums(cams, extra, near, far, rng)?,
+                    TopUp::NearPoints => near_points(&p, &c, cfg.init.knn, extra, rng)?,
                 };
                 p.extend(rp);
                 c.extend(rc);
@@ -350,16 +408,8 @@ pub fn prepare_input(
                 cfg.init.random_near * scene_scale,
                 cfg.init.random_far * scene_scale,
             );
-            random_in_frustums(&cams, random_points, near, far, &mut rng)?
+            random_in_frustums(cams, random_points, near, far, rng)?
         }
-    };
-    let gaussians = from_points(&points, &colors, &cfg.init, cfg.sh_degree, &mut rng)?;
-    Ok(TrainInput {
-        views,
-        gaussians,
-        normalization: norm,
-        scene_scale,
-        init_label: mode.label(),
     })
 }
 
