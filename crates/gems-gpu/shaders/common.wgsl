@@ -57,6 +57,37 @@ fn group_index(wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return wid.x + wid.y * nwg.x;
 }
 
+// The pixel that invocation `lid` of a (camera, tile) workgroup shades: the forward and the
+// backward rasterizers share this layout (16×16 tiles, row-major, pixel centres at +0.5).
+struct TilePixel {
+    camera: u32,
+    px: u32,
+    py: u32,
+    inside: bool,
+    pxi: i32,
+    pyi: i32,
+    pcx: f32,
+    pcy: f32,
+}
+
+// `gt` is the workgroup's (camera, tile) index, below num_cameras·tiles.
+fn tile_pixel(p: Params, gt: u32, lid: u32) -> TilePixel {
+    let tiles = p.tiles_x * p.tiles_y;
+    let tile = gt % tiles;
+    let px = (tile % p.tiles_x) * 16u + lid % 16u;
+    let py = (tile / p.tiles_x) * 16u + lid / 16u;
+    return TilePixel(
+        gt / tiles,
+        px,
+        py,
+        px < p.width && py < p.height,
+        i32(px),
+        i32(py),
+        f32(px) + 0.5,
+        f32(py) + 0.5,
+    );
+}
+
 // Infinity and NaN have all exponent bits set; testing the bits does not depend on how the
 // compiler treats NaN in comparisons.
 fn finite(x: f32) -> bool {

@@ -24,20 +24,13 @@ var<workgroup> max_last_copy: u32;
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let tiles = params.tiles_x * params.tiles_y;
+    // One workgroup per (camera, tile); the dispatch may round up.
     let gt = group_index(wid, nwg);
-    if gt >= params.num_cameras * tiles {
+    if gt >= params.num_cameras * params.tiles_x * params.tiles_y {
         return;
     }
-    let c = gt / tiles;
-    let tile = gt % tiles;
-    let px = (tile % params.tiles_x) * 16u + lid % 16u;
-    let py = (tile / params.tiles_x) * 16u + lid / 16u;
-    let inside = px < params.width && py < params.height;
-    let pxi = i32(px);
-    let pyi = i32(py);
-    let pcx = f32(px) + 0.5;
-    let pcy = f32(py) + 0.5;
+    let tp = tile_pixel(params, gt, lid);
+    let c = tp.camera;
     if lid == 0u {
         atomicStore(&max_last, 0u);
     }
@@ -47,8 +40,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     var v_final = 0.0;
     var t = 0.0;
     var last = 0u;
-    if inside {
-        let pix = (c * params.height + py) * params.width + px;
+    if tp.inside {
+        let pix = (c * params.height + tp.py) * params.width + tp.px;
         v = vec3<f32>(d_rgb[pix * 3u], d_rgb[pix * 3u + 1u], d_rgb[pix * 3u + 2u]);
         var va = 0.0;
         if params.has_d_alpha != 0u {
@@ -81,12 +74,12 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             let jj = j - 1u - start;
             var g: array<f32, SG>;
             let box = batch[jj].pbox;
-            if j - 1u < last && pxi >= box.x && pxi <= box.y && pyi >= box.z && pyi <= box.w {
+            if j - 1u < last && tp.pxi >= box.x && tp.pxi <= box.y && tp.pyi >= box.z && tp.pyi <= box.w {
                 let s = batch[jj].xyod;
                 let cn = batch[jj].conic;
                 let col = batch[jj].color.xyz;
-                let dx = s.x - pcx;
-                let dy = s.y - pcy;
+                let dx = s.x - tp.pcx;
+                let dy = s.y - tp.pcy;
                 let sigma = 0.5 * (cn.x * dx * dx + cn.z * dy * dy) + cn.y * dx * dy;
                 let gauss = exp(-sigma);
                 let raw = s.z * gauss;

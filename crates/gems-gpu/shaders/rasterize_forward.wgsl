@@ -19,25 +19,18 @@ var<workgroup> n_done_copy: u32;
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let tiles = params.tiles_x * params.tiles_y;
+    // One workgroup per (camera, tile); the dispatch may round up.
     let gt = group_index(wid, nwg);
-    if gt >= params.num_cameras * tiles {
+    if gt >= params.num_cameras * params.tiles_x * params.tiles_y {
         return;
     }
-    let c = gt / tiles;
-    let tile = gt % tiles;
-    let px = (tile % params.tiles_x) * 16u + lid % 16u;
-    let py = (tile / params.tiles_x) * 16u + lid / 16u;
-    let inside = px < params.width && py < params.height;
-    let pxi = i32(px);
-    let pyi = i32(py);
-    let pcx = f32(px) + 0.5;
-    let pcy = f32(py) + 0.5;
+    let tp = tile_pixel(params, gt, lid);
+    let c = tp.camera;
     if lid == 0u {
         atomicStore(&n_done, 0u);
     }
     workgroupBarrier();
-    var done = !inside;
+    var done = !tp.inside;
     if done {
         atomicAdd(&n_done, 1u);
     }
@@ -56,13 +49,13 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         if !done {
             for (var j = 0u; j < m; j++) {
                 let box = batch[j].pbox;
-                if pxi < box.x || pxi > box.y || pyi < box.z || pyi > box.w {
+                if tp.pxi < box.x || tp.pxi > box.y || tp.pyi < box.z || tp.pyi > box.w {
                     continue;
                 }
                 let s = batch[j].xyod;
                 let cn = batch[j].conic;
-                let dx = s.x - pcx;
-                let dy = s.y - pcy;
+                let dx = s.x - tp.pcx;
+                let dy = s.y - tp.pcy;
                 let sigma = 0.5 * (cn.x * dx * dx + cn.z * dy * dy) + cn.y * dx * dy;
                 let alpha = min(params.alpha_max, s.z * exp(-sigma));
                 if !(sigma >= 0.0 && alpha >= params.alpha_min) {
@@ -89,10 +82,10 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             break;
         }
     }
-    if !inside {
+    if !tp.inside {
         return;
     }
-    let pix = (c * params.height + py) * params.width + px;
+    let pix = (c * params.height + tp.py) * params.width + tp.px;
     let bg = vec3<f32>(cams[c * CAMF + 16u], cams[c * CAMF + 17u], cams[c * CAMF + 18u]);
     let out = col + t * bg;
     rgb_out[pix * 3u] = out.x;
