@@ -126,66 +126,15 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
         path: job.output.to_path_buf(),
         source,
     })?;
-    let pose_model = match &job.mode {
-        InitMode::Colmap(Some(dir)) => Some(std::fs::canonicalize(dir).unwrap_or(dir.clone())),
-        InitMode::Colmap(None) => scene
-            .sfm_dir
-            .as_ref()
-            .map(|d| std::fs::canonicalize(d).unwrap_or(d.clone())),
-        InitMode::Gt | InitMode::GtNoisy { .. } => None,
-    };
-
-    let mut trainer = if job.resume && has_checkpoint(job.output) {
-        let (ckpt_cfg, state) = load_checkpoint(job.output)?;
-        let input = prepare_input(&scene, &job.mode, &ckpt_cfg)?;
-        tracing::info!(step = state.step, "resuming from checkpoint");
-        Trainer::from_state(
-            ckpt_cfg,
-            input.views,
-            input.normalization,
-            input.scene_scale,
-            input.init_label,
-            state,
-        )?
-    } else {
-        if job.resume {
-            tracing::warn!(
-                "--resume: no checkpoint in {}, starting fresh",
-                job.output.display()
-            );
-        }
-        let input = prepare_input(&scene, &job.mode, &job.cfg)?;
-        tracing::info!(views = input.views.len(), gaussians = input.gaussians.len(), init = %input.init_label, "training");
-        Trainer::new(job.cfg, input)?
-    };
+    let pose_model = pose_model_of(&job.mode, &scene);
+    let mut trainer = start_trainer(&scene, &job.mode, job.cfg, job.resume, job.output)?;
     trainer.set_engine(job.engine);
     gems_fs::write_atomic(
         &job.output.join("config.toml"),
         trainer.config().to_toml().as_bytes(),
     )?;
-
-    let bar = progress_bar(
-        job.progress,
-        trainer.config().steps,
-        "{bar:30} {pos}/{len} steps  {msg}  {per_sec}  ETA {eta}",
-    );
-    bar.set_position(trainer.steps_done() as u64);
     let start = Instant::now();
-    let out_dir = job.output.to_path_buf();
-    trainer.run(|t, r| {
-        bar.set_position(r.step as u64);
-        bar.set_message(format!(
-            "loss {:.4}  PSNR {:.2}  Gaussians {}",
-            r.loss, r.psnr, r.gaussians
-        ));
-        let every = t.config().checkpoint_every;
-        if every > 0 && r.step % every == 0 && r.step < t.config().steps {
-            save_checkpoint(&out_dir, t)?;
-        }
-        Ok(())
-    })?;
-    bar.finish();
-    save_checkpoint(job.output, &trainer)?;
+    train_with_checkpoints(&mut trainer, job.output, job.progress)?;
     let mut output = TrainOutput::from_trainer(&trainer);
     output.pose_model = pose_model;
     output.save(job.output)?;
@@ -201,7 +150,6 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
         steps = output.steps,
         "trained"
     );
-
     if !job.evaluate {
         return Ok(RunOutcome {
             point_cloud: ply,
@@ -209,9 +157,116 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
             metrics: None,
         });
     }
-    let scene = gems_eval::open_scene_for(&output, job.scene, &job.open)?;
-    let mut data = gems_eval::eval_data_from_scene(&output, &scene)?;
-    attach_edi(&mut data, &output, job.output)?;
+    let mut engine = trainer.set_engine(Engine::cpu());
+    let reporting = Reporting {
+        scene: job.scene,
+        open: &job.open,
+        output: job.output,
+        lpips: job.lpips,
+        progress: job.progress,
+    };
+    let (report, metrics) = evaluate_and_report(&reporting, &output, &mut engine)?;
+    Ok(RunOutcome {
+        point_cloud: ply,
+        report: Some(report),
+        metrics: Some(metrics),
+    })
+}
+
+/// The COLMAP model the initial poses come from, if any (held-out views are evaluated from its
+/// poses).
+fn pose_model_of(mode: &InitMode, scene: &gems_data::Scene) -> Option<PathBuf> {
+    match mode {
+        InitMode::Colmap(Some(dir)) => Some(std::fs::canonicalize(dir).unwrap_or(dir.clone())),
+        InitMode::Colmap(None) => scene
+            .sfm_dir
+            .as_ref()
+            .map(|d| std::fs::canonicalize(d).unwrap_or(d.clone())),
+        InitMode::Gt | InitMode::GtNoisy { .. } => None,
+    }
+}
+
+/// A trainer resumed from the checkpoint in `output` (with the configuration it was written
+/// with) when asked and there is one, else a fresh one with `cfg`.
+fn start_trainer(
+    scene: &gems_data::Scene,
+    mode: &InitMode,
+    cfg: TrainConfig,
+    resume: bool,
+    output: &Path,
+) -> Result<Trainer, PipelineError> {
+    if resume && has_checkpoint(output) {
+        let (ckpt_cfg, state) = load_checkpoint(output)?;
+        let input = prepare_input(scene, mode, &ckpt_cfg)?;
+        tracing::info!(step = state.step, "resuming from checkpoint");
+        return Ok(Trainer::from_state(
+            ckpt_cfg,
+            input.views,
+            input.normalization,
+            input.scene_scale,
+            input.init_label,
+            state,
+        )?);
+    }
+    if resume {
+        tracing::warn!(
+            "--resume: no checkpoint in {}, starting fresh",
+            output.display()
+        );
+    }
+    let input = prepare_input(scene, mode, &cfg)?;
+    tracing::info!(views = input.views.len(), gaussians = input.gaussians.len(), init = %input.init_label, "training");
+    Ok(Trainer::new(cfg, input)?)
+}
+
+/// Runs the remaining steps with a checkpoint every `checkpoint_every` steps and one at the end.
+fn train_with_checkpoints(
+    trainer: &mut Trainer,
+    output: &Path,
+    progress: bool,
+) -> Result<(), PipelineError> {
+    let bar = progress_bar(
+        progress,
+        trainer.config().steps,
+        "{bar:30} {pos}/{len} steps  {msg}  {per_sec}  ETA {eta}",
+    );
+    bar.set_position(trainer.steps_done() as u64);
+    trainer.run(|t, r| {
+        bar.set_position(r.step as u64);
+        bar.set_message(format!(
+            "loss {:.4}  PSNR {:.2}  Gaussians {}",
+            r.loss, r.psnr, r.gaussians
+        ));
+        let every = t.config().checkpoint_every;
+        if every > 0 && r.step % every == 0 && r.step < t.config().steps {
+            save_checkpoint(output, t)?;
+        }
+        Ok(())
+    })?;
+    bar.finish();
+    save_checkpoint(output, trainer)?;
+    Ok(())
+}
+
+/// Where [`evaluate_and_report`] reads ground truth from and writes to.
+struct Reporting<'a> {
+    scene: &'a Path,
+    open: &'a gems_data::OpenOptions,
+    output: &'a Path,
+    lpips: &'a [PathBuf],
+    progress: bool,
+}
+
+/// The evaluation protocol on the trained result, then `metrics.json`, trajectories, renders
+/// and `report.html` in the output folder; returns the report's path and the metrics.
+fn evaluate_and_report(
+    job: &Reporting<'_>,
+    output: &TrainOutput,
+    engine: &mut Engine,
+) -> Result<(PathBuf, MetricsReport), PipelineError> {
+    let scene = gems_eval::open_scene_for(output, job.scene, job.open)?;
+    let mut data = gems_eval::eval_data_from_scene(output, &scene)?;
+    attach_edi(&mut data, output, job.output)?;
     let lpips = if job.lpips.is_empty() {
         tracing::warn!("no --lpips weights given: LPIPS is reported as absent");
         None
@@ -223,10 +278,9 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
         gems_eval::evaluation_units(&data),
         "evaluating {bar:30} {pos}/{len} views  ETA {eta}",
     );
-    let mut engine = trainer.set_engine(Engine::cpu());
     let eval = gems_eval::evaluate_output_on(
-        &mut engine,
-        &output,
+        engine,
+        output,
         &data,
         &gems_eval::PoseRefineConfig::default(),
         lpips.as_ref(),
@@ -234,17 +288,13 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
     )?;
     bar.finish();
     gems_eval::write_metrics_json(&job.output.join("metrics.json"), &eval.metrics)?;
-    gems_eval::write_trajectories(job.output, &output)?;
-    gems_eval::write_renders_on(&mut engine, job.output, &output, &data, &eval)?;
+    gems_eval::write_trajectories(job.output, output)?;
+    gems_eval::write_renders_on(engine, job.output, output, &data, &eval)?;
     let report = gems_eval::write_report(
         job.output,
-        &gems_eval::report_input(&output, &data, &eval, 4),
+        &gems_eval::report_input(output, &data, &eval, 4),
     )?;
-    Ok(RunOutcome {
-        point_cloud: ply,
-        report: Some(report),
-        metrics: Some(eval.metrics),
-    })
+    Ok((report, eval.metrics))
 }
 
 /// Puts the EDI images of an events run (`<dir>/edi/images`) into the report's grid.
