@@ -314,8 +314,22 @@ fn split_table(html: &mut String, title: &str, s: &Option<SplitScores>) {
 /// Writes `report.html` and its figures under `dir/report/`; returns the HTML path.
 pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalError> {
     let fig_dir = dir.join("report");
-    let m = &input.metrics;
     let mut html = String::new();
+    header_section(&mut html, input);
+    viewer_section(&mut html, dir, input)?;
+    metrics_section(&mut html, &input.metrics);
+    curves_section(&mut html, &fig_dir, input)?;
+    trajectory_section(&mut html, &fig_dir, input)?;
+    grid_section(&mut html, &fig_dir, input)?;
+    html.push_str("</body></html>\n");
+    let path = dir.join("report.html");
+    gems_fs::write_atomic(&path, html.as_bytes())?;
+    Ok(path)
+}
+
+/// Title, style and the run's one-line summary.
+fn header_section(html: &mut String, input: &ReportInput) {
+    let m = &input.metrics;
     let _ = write!(
         html,
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
@@ -332,6 +346,10 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
         m.seconds,
         m.gaussians
     );
+}
+
+/// The interactive WebGL2 view (also written alone as `viewer.html`), when there is one.
+fn viewer_section(html: &mut String, dir: &Path, input: &ReportInput) -> Result<(), EvalError> {
     if let Some(scene) = &input.viewer {
         for (rel, img) in &scene.image_files {
             save_png(&dir.join(rel), img)?;
@@ -351,6 +369,11 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
             crate::viewer::viewer_page(scene, &input.title).as_bytes(),
         )?;
     }
+    Ok(())
+}
+
+/// The metric tables of every split and APE.
+fn metrics_section(html: &mut String, m: &MetricsReport) {
     if [&m.deblur, &m.deblur_refined, &m.nvs, &m.nvs_no_pose_opt]
         .iter()
         .any(|s| s.as_ref().is_some_and(|s| s.lpips.is_none()))
@@ -359,23 +382,23 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
     }
     html.push_str("<h2>Metrics</h2>\n");
     split_table(
-        &mut html,
+        html,
         "Blurry input (training images vs their sharp ground truth)",
         &m.input,
     );
     split_table(
-        &mut html,
+        html,
         "Deblurring (training views at trajectory midpoint)",
         &m.deblur,
     );
     split_table(
-        &mut html,
+        html,
         "Deblurring (test-time pose refinement from the initial pose, as the GeMS authors evaluate)",
         &m.deblur_refined,
     );
-    split_table(&mut html, "Novel views (test-time pose refinement)", &m.nvs);
+    split_table(html, "Novel views (test-time pose refinement)", &m.nvs);
     split_table(
-        &mut html,
+        html,
         "Novel views (initial poses, no refinement)",
         &m.nvs_no_pose_opt,
     );
@@ -391,6 +414,10 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
         }
         None => html.push_str("<h3>APE</h3><p>Not available (no ground-truth poses).</p>\n"),
     }
+}
+
+/// Loss and PSNR curves.
+fn curves_section(html: &mut String, fig_dir: &Path, input: &ReportInput) -> Result<(), EvalError> {
     html.push_str("<h2>Training curves</h2>\n");
     for (file, label, values) in [
         ("loss.png", "Training loss", &input.loss),
@@ -409,6 +436,15 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
             );
         }
     }
+    Ok(())
+}
+
+/// The top-view trajectory plot, when there is anything to plot.
+fn trajectory_section(
+    html: &mut String,
+    fig_dir: &Path,
+    input: &ReportInput,
+) -> Result<(), EvalError> {
     if plot_trajectories(&fig_dir.join("trajectory.png"), input)? {
         html.push_str(
             "<h2>Trajectories</h2>\n<p>Top view on the two principal axes (equal scale). Red: estimated \
@@ -417,6 +453,11 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
              centres when known).</p><img src=\"report/trajectory.png\">\n",
         );
     }
+    Ok(())
+}
+
+/// The blurry | (EDI |) ours | ground-truth grid and its per-row PSNRs.
+fn grid_section(html: &mut String, fig_dir: &Path, input: &ReportInput) -> Result<(), EvalError> {
     if let Some(grid) = compose_grid(&input.grid) {
         save_png(&fig_dir.join("grid.png"), &grid)?;
         let with_edi = input.grid.iter().any(|r| r.edi.is_some());
@@ -454,8 +495,5 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
         }
         html.push_str("</table>\n");
     }
-    html.push_str("</body></html>\n");
-    let path = dir.join("report.html");
-    gems_fs::write_atomic(&path, html.as_bytes())?;
-    Ok(path)
+    Ok(())
 }
