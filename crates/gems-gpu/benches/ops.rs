@@ -161,43 +161,7 @@ mod adam_100k {
             beta2: CFG.beta2,
             eps: CFG.eps,
         };
-        b.bench_local(|| {
-            a.means.step(
-                bytemuck::cast_slice_mut(&mut g.means),
-                bytemuck::cast_slice(&gr.means),
-                LRS.means,
-                0.0,
-                h,
-            );
-            a.quats.step(
-                bytemuck::cast_slice_mut(&mut g.quats),
-                bytemuck::cast_slice(&gr.quats),
-                LRS.quats,
-                0.0,
-                h,
-            );
-            a.log_scales.step(
-                bytemuck::cast_slice_mut(&mut g.log_scales),
-                bytemuck::cast_slice(&gr.log_scales),
-                LRS.log_scales,
-                0.0,
-                h,
-            );
-            a.opacity_logits.step(
-                &mut g.opacity_logits,
-                &gr.opacity_logits,
-                LRS.opacity_logits,
-                0.0,
-                h,
-            );
-            a.sh.step_by_column(
-                bytemuck::cast_slice_mut(&mut g.sh),
-                bytemuck::cast_slice(&gr.sh),
-                |c| if c < 3 { LRS.sh_dc } else { LRS.sh_rest },
-                0.0,
-                h,
-            );
-        });
+        b.bench_local(|| a.step(&mut g, &gr, &LRS, h));
     }
 }
 

@@ -50,48 +50,14 @@ fn gradients(n: usize, seed: u64) -> gems_splat::Gradients {
     out
 }
 
-/// The CPU trainer's `adam_gaussians` (gems-train trainer.rs), group by group.
+/// The CPU trainer's Gaussian Adam step (gems-train `GaussianAdam::step`).
 fn cpu_step(g: &mut gems_splat::Gaussians, a: &mut GaussianAdam, gr: &gems_splat::Gradients) {
     let h = AdamHyper {
         beta1: CFG.beta1,
         beta2: CFG.beta2,
         eps: CFG.eps,
     };
-    a.means.step(
-        bytemuck::cast_slice_mut(&mut g.means),
-        bytemuck::cast_slice(&gr.means),
-        LRS.means,
-        0.0,
-        h,
-    );
-    a.quats.step(
-        bytemuck::cast_slice_mut(&mut g.quats),
-        bytemuck::cast_slice(&gr.quats),
-        LRS.quats,
-        0.0,
-        h,
-    );
-    a.log_scales.step(
-        bytemuck::cast_slice_mut(&mut g.log_scales),
-        bytemuck::cast_slice(&gr.log_scales),
-        LRS.log_scales,
-        0.0,
-        h,
-    );
-    a.opacity_logits.step(
-        &mut g.opacity_logits,
-        &gr.opacity_logits,
-        LRS.opacity_logits,
-        0.0,
-        h,
-    );
-    a.sh.step_by_column(
-        bytemuck::cast_slice_mut(&mut g.sh),
-        bytemuck::cast_slice(&gr.sh),
-        |col| if col < 3 { LRS.sh_dc } else { LRS.sh_rest },
-        0.0,
-        h,
-    );
+    a.step(g, gr, &LRS, h);
 }
 
 fn cpu_state(a: &GaussianAdam, group: Group) -> &AdamState {

@@ -4,6 +4,8 @@
 //! (`width` floats per row, one row per Gaussian or per trajectory), so MCMC can reset or append
 //! rows without touching the others. Updates are elementwise, hence independent of thread count.
 
+use gems_gpu::GaussianLrs;
+use gems_splat::{Gaussians, Gradients};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -146,6 +148,48 @@ impl GaussianAdam {
             opacity_logits: AdamState::new(n, 1),
             sh: AdamState::new(n, 48),
         }
+    }
+
+    /// One Adam step of every Gaussian group from the renderer's gradients, without weight
+    /// decay; the SH dc columns (0..3) take `lrs.sh_dc`, the rest `lrs.sh_rest`. The trainer's
+    /// step, and the CPU reference of gems-gpu's `GpuAdam`.
+    pub fn step(&mut self, g: &mut Gaussians, gr: &Gradients, lrs: &GaussianLrs, h: AdamHyper) {
+        self.means.step(
+            bytemuck::cast_slice_mut(&mut g.means),
+            bytemuck::cast_slice(&gr.means),
+            lrs.means,
+            0.0,
+            h,
+        );
+        self.quats.step(
+            bytemuck::cast_slice_mut(&mut g.quats),
+            bytemuck::cast_slice(&gr.quats),
+            lrs.quats,
+            0.0,
+            h,
+        );
+        self.log_scales.step(
+            bytemuck::cast_slice_mut(&mut g.log_scales),
+            bytemuck::cast_slice(&gr.log_scales),
+            lrs.log_scales,
+            0.0,
+            h,
+        );
+        self.opacity_logits.step(
+            &mut g.opacity_logits,
+            &gr.opacity_logits,
+            lrs.opacity_logits,
+            0.0,
+            h,
+        );
+        let (dc, rest) = (lrs.sh_dc, lrs.sh_rest);
+        self.sh.step_by_column(
+            bytemuck::cast_slice_mut(&mut g.sh),
+            bytemuck::cast_slice(&gr.sh),
+            |col| if col < 3 { dc } else { rest },
+            0.0,
+            h,
+        );
     }
 
     pub(crate) fn groups(&mut self) -> [&mut AdamState; 5] {

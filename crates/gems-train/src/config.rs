@@ -301,6 +301,19 @@ impl TrainConfig {
         Ok(())
     }
 
+    /// The Gaussian groups' learning rates at `step` (the means lr decayed and scaled by the
+    /// scene scale).
+    pub fn gaussian_lrs(&self, step: usize, scene_scale: f32) -> gems_gpu::GaussianLrs {
+        gems_gpu::GaussianLrs {
+            means: self.means_lr(step, scene_scale),
+            quats: self.lr.quats,
+            log_scales: self.lr.log_scales,
+            opacity_logits: self.lr.opacities,
+            sh_dc: self.lr.sh_dc,
+            sh_rest: self.lr.sh_rest,
+        }
+    }
+
     /// Number of trajectory control knots for the configured kind.
     pub fn num_knots(&self) -> usize {
         self.trajectory.knots(self.bezier_knots)

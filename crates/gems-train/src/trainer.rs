@@ -25,7 +25,7 @@
 
 use std::time::Instant;
 
-use gems_gpu::{AdamConfig, GaussianLrs, GroupMoments, NoiseParams, ResidentStep, StepSettings};
+use gems_gpu::{AdamConfig, GroupMoments, NoiseParams, ResidentStep, StepSettings};
 use gems_math::{Intrinsics, Se3, Trajectory};
 use gems_metrics::TrainingLoss;
 use gems_splat::{Camera, Gaussians, Gradients, RenderSettings};
@@ -583,14 +583,7 @@ impl Trainer {
             ssim_lambda: c.ssim_lambda,
             opacity_reg: c.mcmc.opacity_reg,
             scale_reg: c.mcmc.scale_reg,
-            lrs: GaussianLrs {
-                means: c.means_lr(step, self.scene_scale),
-                quats: c.lr.quats,
-                log_scales: c.lr.log_scales,
-                opacity_logits: c.lr.opacities,
-                sh_dc: c.lr.sh_dc,
-                sh_rest: c.lr.sh_rest,
-            },
+            lrs: c.gaussian_lrs(step, self.scene_scale),
             adam: AdamConfig {
                 beta1: c.adam_beta1,
                 beta2: c.adam_beta2,
@@ -659,45 +652,8 @@ impl Trainer {
             beta2: c.adam_beta2,
             eps: c.adam_eps,
         };
-        let g = &mut self.state.gaussians;
-        let a = &mut self.state.adam;
-        let lr_means = c.means_lr(step, self.scene_scale);
-        a.means.step(
-            bytemuck::cast_slice_mut(&mut g.means),
-            bytemuck::cast_slice(&gr.means),
-            lr_means,
-            0.0,
-            h,
-        );
-        a.quats.step(
-            bytemuck::cast_slice_mut(&mut g.quats),
-            bytemuck::cast_slice(&gr.quats),
-            c.lr.quats,
-            0.0,
-            h,
-        );
-        a.log_scales.step(
-            bytemuck::cast_slice_mut(&mut g.log_scales),
-            bytemuck::cast_slice(&gr.log_scales),
-            c.lr.log_scales,
-            0.0,
-            h,
-        );
-        a.opacity_logits.step(
-            &mut g.opacity_logits,
-            &gr.opacity_logits,
-            c.lr.opacities,
-            0.0,
-            h,
-        );
-        let (dc, rest) = (c.lr.sh_dc, c.lr.sh_rest);
-        a.sh.step_by_column(
-            bytemuck::cast_slice_mut(&mut g.sh),
-            bytemuck::cast_slice(&gr.sh),
-            |col| if col < 3 { dc } else { rest },
-            0.0,
-            h,
-        );
+        let lrs = c.gaussian_lrs(step, self.scene_scale);
+        self.state.adam.step(&mut self.state.gaussians, gr, &lrs, h);
     }
 
     fn pose_update(&mut self, v: usize, step: usize) {
