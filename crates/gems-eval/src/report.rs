@@ -126,14 +126,9 @@ fn plot_curve(path: &Path, values: &[f32]) -> Result<Option<(f64, f64)>, EvalErr
     Ok(Some((y0, y1)))
 }
 
-/// Top view of the trajectories on the two principal axes of all centres. The estimate is
-/// Sim(3)-aligned to the ground truth first when at least three views have it.
-fn plot_trajectories(path: &Path, input: &ReportInput) -> Result<bool, EvalError> {
-    let mids: Vec<[f64; 3]> = input
-        .trajectories
-        .iter()
-        .filter_map(|t| t.get(t.len() / 2).copied())
-        .collect();
+/// Each view's estimated exposure path, Sim(3)-aligned (Umeyama) to the ground-truth
+/// mid-exposure centres when at least three views have one.
+fn aligned_paths(input: &ReportInput) -> Vec<Vec<[f64; 3]>> {
     let pairs: Vec<([f64; 3], [f64; 3])> = input
         .trajectories
         .iter()
@@ -147,11 +142,38 @@ fn plot_trajectories(path: &Path, input: &ReportInput) -> Result<bool, EvalError
         None
     };
     let map = |p: &[f64; 3]| align.map_or(*p, |s| s.act(p));
-    let est: Vec<Vec<[f64; 3]>> = input
+    input
         .trajectories
         .iter()
         .map(|t| t.iter().map(map).collect())
+        .collect()
+}
+
+/// The mean of `points` and their two largest principal axes: the plane the top view shows.
+fn principal_plane(points: &[Vector3<f64>]) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+    let mean = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
+    let cov = points.iter().fold(Matrix3::zeros(), |c, p| {
+        c + (p - mean) * (p - mean).transpose()
+    });
+    let eig = cov.symmetric_eigen();
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    (
+        mean,
+        eig.eigenvectors.column(order[0]).into_owned(),
+        eig.eigenvectors.column(order[1]).into_owned(),
+    )
+}
+
+/// Top view of the trajectories on the two principal axes of all centres. The estimate is
+/// Sim(3)-aligned to the ground truth first when at least three views have it.
+fn plot_trajectories(path: &Path, input: &ReportInput) -> Result<bool, EvalError> {
+    let mids: Vec<[f64; 3]> = input
+        .trajectories
+        .iter()
+        .filter_map(|t| t.get(t.len() / 2).copied())
         .collect();
+    let est = aligned_paths(input);
     let gt: Vec<[f64; 3]> = input.gt_centres.iter().flatten().copied().collect();
     let gt_paths: Vec<&Vec<[f64; 3]>> = input.gt_paths.iter().filter(|p| p.len() > 1).collect();
     let all: Vec<Vector3<f64>> = est
@@ -164,17 +186,7 @@ fn plot_trajectories(path: &Path, input: &ReportInput) -> Result<bool, EvalError
     if all.is_empty() || mids.is_empty() {
         return Ok(false);
     }
-    let mean = all.iter().sum::<Vector3<f64>>() / all.len() as f64;
-    let cov = all.iter().fold(Matrix3::zeros(), |c, p| {
-        c + (p - mean) * (p - mean).transpose()
-    });
-    let eig = cov.symmetric_eigen();
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let (ax, ay) = (
-        eig.eigenvectors.column(order[0]).into_owned(),
-        eig.eigenvectors.column(order[1]).into_owned(),
-    );
+    let (mean, ax, ay) = principal_plane(&all);
     let proj = |p: &[f64; 3]| {
         let d = Vector3::from(*p) - mean;
         (d.dot(&ax), d.dot(&ay))
