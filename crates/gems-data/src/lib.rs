@@ -2,7 +2,7 @@
 //! layouts our users hold (GeMS/BAD-Gaussians/PRISM3D, COLMAP, LLFF, ExBluRF, nerfstudio).
 //!
 //! # Conventions
-//! Poses are **world-to-camera** ([`Pose`]: `x_cam = R·x_world + t`), OpenCV camera axes (x right,
+//! Poses are **world-to-camera** ([`gems_math::Pose`]: `x_cam = R·x_world + t`), OpenCV camera axes (x right,
 //! y down, z forward), f64. Images in memory are [`ImageRgb`]: interleaved RGB `f32` in `[0, 1]`
 //! (sRGB values as stored), row-major. Every error names the file at fault ([`DataError`]);
 //! every writer is atomic (temp file + rename).

@@ -5,7 +5,7 @@
 //! camera centre, column 4 is `[height, width, focal]`. Rows are sorted by image name.
 //!
 //! [`LlffRow`] keeps the raw 17 numbers (so reading and re-writing is exact); [`LlffRow::pose`]
-//! and [`LlffRow::from_pose`] convert to and from gems' world-to-camera OpenCV [`Pose`]:
+//! and [`LlffRow::from_pose`] convert to and from gems' world-to-camera OpenCV [`gems_math::Pose`]:
 //! OpenCV c2w columns = `[col1, col0, −col2]`.
 
 use std::path::Path;
