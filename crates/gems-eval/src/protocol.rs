@@ -68,28 +68,17 @@ pub fn evaluate_output(
     refine: &PoseRefineConfig,
     lpips: Option<&Lpips>,
 ) -> Result<Evaluation, EvalError> {
-    evaluate_output_with_progress(output, data, refine, lpips, &mut |_| {})
+    evaluate_output_on(&mut Engine::cpu(), output, data, refine, lpips, &mut |_| {})
 }
 
 /// Renders [`evaluate_output`] does: two per deblur view (midpoint and refined) plus two per
-/// held-out view; pass it to a progress bar driven by [`evaluate_output_with_progress`].
+/// held-out view; pass it to a progress bar driven by [`evaluate_output_on`].
 pub fn evaluation_units(data: &EvalData) -> usize {
     2 * data.train_gt.iter().flatten().count() + 2 * data.held_out.len()
 }
 
-/// [`evaluate_output`], calling `on_view` with the view name after each of the
-/// [`evaluation_units`] evaluations (the refined ones are the slow ones).
-pub fn evaluate_output_with_progress(
-    output: &TrainOutput,
-    data: &EvalData,
-    refine: &PoseRefineConfig,
-    lpips: Option<&Lpips>,
-    on_view: &mut dyn FnMut(&str),
-) -> Result<Evaluation, EvalError> {
-    evaluate_output_on(&mut Engine::cpu(), output, data, refine, lpips, on_view)
-}
-
-/// [`evaluate_output_with_progress`] rendering with `engine` (`--device`).
+/// [`evaluate_output`] rendering with `engine` (`--device`), calling `on_view` with the view
+/// name after each of the [`evaluation_units`] evaluations (the refined ones are the slow ones).
 pub fn evaluate_output_on(
     engine: &mut Engine,
     output: &TrainOutput,

@@ -71,11 +71,15 @@ fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
 fn protocol_and_outputs() {
     let (out, data) = output(0.004);
     let mut seen = Vec::new();
-    let eval =
-        evaluate_output_with_progress(&out, &data, &PoseRefineConfig::default(), None, &mut |n| {
-            seen.push(n.to_owned());
-        })
-        .unwrap();
+    let eval = evaluate_output_on(
+        &mut gems_gpu::Engine::cpu(),
+        &out,
+        &data,
+        &PoseRefineConfig::default(),
+        None,
+        &mut |n| seen.push(n.to_owned()),
+    )
+    .unwrap();
     assert_eq!(seen.len(), evaluation_units(&data));
     assert_eq!(
         (seen[0].as_str(), seen[5].as_str(), seen[8].as_str()),
