@@ -228,6 +228,43 @@ pub fn uneven_speed_energy(
     weight * energy
 }
 
+/// Off-centre energy of the poses Δ(u_k) at `times`: ‖Log Δ(½) − (1/n) Σ_k Log Δ(u_k)‖².
+///
+/// The blur model averages the renders and so sees the exposure's poses only as a set: the
+/// order along the path is free, and the pose at u = ½, which gems reports as the sharp
+/// mid-exposure view, can drift to one end of the set (a hooked path that dwells or folds). The
+/// set's mean, unlike its order, is fixed by the blurry image. This energy pulls Δ(½) onto that
+/// mean, the mid-exposure pose of a camera moving at even speed along a straight path, without
+/// pulling the path shorter (a rigid shift of the whole set leaves it unchanged).
+///
+/// Adds `weight` × its gradient with respect to the knots to `knot_grads` (one [ρ; φ] per knot,
+/// as [`Trajectory::accumulate_knot_gradients`]) and returns `weight` × the energy.
+pub fn off_centre_energy(
+    traj: &Trajectory,
+    times: &[f64],
+    weight: f64,
+    knot_grads: &mut [[f64; 6]],
+) -> f64 {
+    if times.is_empty() || weight == 0.0 {
+        return 0.0;
+    }
+    let mid = traj.eval(0.5).log();
+    let logs: Vec<Vector6<f64>> = times.iter().map(|&u| traj.eval(u).log()).collect();
+    let inv_n = 1.0 / times.len() as f64;
+    let r = mid - logs.iter().sum::<Vector6<f64>>() * inv_n;
+    // d Log(Δ Exp(δ)) / dδ = J_r⁻¹(Log Δ), so dE/dδ = J_r⁻¹ᵀ ∂E/∂ξ with ∂E/∂ξ_mid = 2r and
+    // ∂E/∂ξ_k = −2r/n.
+    let mut add = |u: f64, xi: &Vector6<f64>, d_xi: Vector6<f64>| {
+        let g = se3_right_jacobian_inv(xi).transpose() * d_xi * weight;
+        traj.accumulate_knot_gradients(u, &std::array::from_fn(|i| g[i]), knot_grads);
+    };
+    add(0.5, &mid, r * 2.0);
+    for (&u, xi) in times.iter().zip(&logs) {
+        add(u, xi, r * (-2.0 * inv_n));
+    }
+    weight * r.norm_squared()
+}
+
 fn bezier_with_jacobians(knots: &[[f64; 6]], u: f64) -> (Se3, Vec<Jacobian6>) {
     let b = bernstein(knots.len() - 1, u);
     let scaled: Vec<Vector6<f64>> = knots

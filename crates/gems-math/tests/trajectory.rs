@@ -278,3 +278,54 @@ fn uneven_speed_energy_is_smallest_for_even_spacing() {
     assert_eq!(uneven_speed_energy(&even, &ts, 0.0, &mut zero), 0.0);
     assert_eq!(zero, vec![[0.0; 6]; 2]);
 }
+
+/// The off-centre energy's knot gradient against central finite differences of the energy, for
+/// every trajectory kind.
+#[test]
+fn off_centre_gradient_matches_finite_differences() {
+    let ts = times(7);
+    for kind in all_kinds() {
+        let k0 = knots(kind.default_knots(), 0.2);
+        let t = Trajectory::new(kind, k0.clone()).unwrap();
+        let mut grad = vec![[0.0; 6]; k0.len()];
+        let e = off_centre_energy(&t, &ts, 1.5, &mut grad);
+        assert!(e > 0.0);
+        let h = 1e-6;
+        for j in 0..k0.len() {
+            for c in 0..6 {
+                let energy = |d: f64| {
+                    let mut k = k0.clone();
+                    k[j][c] += d;
+                    let t = Trajectory::new(kind, k).unwrap();
+                    off_centre_energy(&t, &ts, 1.5, &mut vec![[0.0; 6]; k0.len()])
+                };
+                let fd = (energy(h) - energy(-h)) / (2.0 * h);
+                assert!(
+                    (fd - grad[j][c]).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "{kind:?} knot {j} coordinate {c}: analytic {} vs finite difference {fd}",
+                    grad[j][c]
+                );
+            }
+        }
+    }
+}
+
+/// A path walked at even speed along a line has its middle on the mean of its poses (no
+/// energy, whatever its length); the same segment walked with u² timing, or folded back on
+/// itself, has its u = ½ pose off that mean; weight 0 adds nothing.
+#[test]
+fn off_centre_energy_vanishes_only_for_a_centred_path() {
+    let line = |a: f64| -> [f64; 6] { [a, 0.5 * a, 0.0, 0.0, 0.0, 0.0] };
+    let ts = times(9);
+    let even = Trajectory::new(TrajectoryKind::Linear, vec![line(-0.3), line(0.3)]).unwrap();
+    let mut g = vec![[0.0; 6]; 2];
+    assert!(off_centre_energy(&even, &ts, 1.0, &mut g) < 1e-24);
+    assert!(g.iter().flatten().all(|x| x.abs() < 1e-12), "{g:?}");
+    let bunched: Vec<f64> = ts.iter().map(|u| u * u).collect();
+    assert!(off_centre_energy(&even, &bunched, 1.0, &mut [[0.0; 6]; 2]) > 1e-3);
+    let folded: Vec<f64> = ts.iter().map(|u| 1.0 - (2.0 * u - 1.0).abs()).collect();
+    assert!(off_centre_energy(&even, &folded, 1.0, &mut [[0.0; 6]; 2]) > 1e-3);
+    let mut zero = vec![[0.0; 6]; 2];
+    assert_eq!(off_centre_energy(&even, &bunched, 0.0, &mut zero), 0.0);
+    assert_eq!(zero, vec![[0.0; 6]; 2]);
+}
