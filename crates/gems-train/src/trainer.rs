@@ -450,6 +450,12 @@ impl Trainer {
                 self.cfg.pose.uneven_speed_weight,
                 &mut self.knot_grads,
             ) as f32;
+            loss += gems_math::off_centre_energy(
+                &traj,
+                &self.times,
+                self.cfg.pose.off_centre_weight,
+                &mut self.knot_grads,
+            ) as f32;
         }
         self.pose_update(v, step);
 

@@ -53,6 +53,43 @@ fn same_seed_same_result_and_resume_is_bit_identical() {
     speed.pose.uneven_speed_weight = 1.0;
     let b = check_same_seed_and_resume(&speed);
     assert_ne!(a.knots, b.knots);
+    // With the off-centre energy off (on by default): the same guarantees, and other
+    // trajectories.
+    let mut free = small_config();
+    free.pose.off_centre_weight = 0.0;
+    let c = check_same_seed_and_resume(&free);
+    assert_ne!(a.knots, c.knots);
+    // From wide random paths, the energy's weight brings u = ½ nearer the mean pose.
+    let mut wide = small_config();
+    wide.pose.knot_init_std = 0.05;
+    wide.pose.accumulate_steps = 1;
+    wide.pose.lr = 1e-2;
+    let off_centre = |weight: f64| -> f64 {
+        let cfg = TrainConfig {
+            pose: gems_train::PoseConfig {
+                off_centre_weight: weight,
+                ..wide.pose.clone()
+            },
+            ..wide.clone()
+        };
+        let mut t = trainer(&cfg);
+        t.run(|_, _| Ok(())).unwrap();
+        let times: Vec<f64> = (0..cfg.num_virtual_views)
+            .map(|k| k as f64 / (cfg.num_virtual_views - 1) as f64)
+            .collect();
+        (0..t.views().len())
+            .map(|v| {
+                let traj = t.trajectory(v);
+                let mut g = vec![[0.0; 6]; traj.num_knots()];
+                gems_math::off_centre_energy(&traj, &times, 1.0, &mut g)
+            })
+            .sum()
+    };
+    let (free, pinned) = (off_centre(0.0), off_centre(10.0));
+    assert!(
+        pinned < 0.5 * free,
+        "off-centre energy {pinned} vs {free} without the term"
+    );
 }
 
 /// Runs `cfg` twice and once interrupted at step 10 and resumed from disk: all three end
