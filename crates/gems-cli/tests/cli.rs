@@ -835,7 +835,15 @@ fn bench_quality_writes_the_four_rows() {
         serde_json::from_str(&std::fs::read_to_string(out.join("quality.json")).unwrap()).unwrap();
     let runs = json.as_array().unwrap();
     assert_eq!(runs.len(), 4);
-    assert!(runs[2]["ape_rmse"].as_f64().unwrap() < 1e-2, "{}", runs[2]);
+    // Started from the ground truth, three steps at the default knot lr (3e-3) move the poses by
+    // a few 1e-3 in the normalised frame (×7 in this scene's units): far nearer than the SfM's.
+    let ape = |r: usize| runs[r]["ape_rmse"].as_f64().unwrap();
+    assert!(
+        ape(2) < 0.05 && ape(2) < 0.5 * ape(1),
+        "{} vs {}",
+        runs[2],
+        runs[1]
+    );
     let sharp = out.join("seed3/sharp");
     let scene = out.join("seed3/scene");
     for e in std::fs::read_dir(scene.join("images_test")).unwrap() {
