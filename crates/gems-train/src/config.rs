@@ -87,7 +87,9 @@ pub struct PoseConfig {
     /// at one end of a hooked path. 0 = off (the GeMS paper). Default 10: on the two tuning
     /// seeds it raised the trajectory-midpoint deblurring (the sharp image gems outputs) by
     /// +2.2 / +0.7 dB and cut its gap to the refined figure from 3.5 / 2.7 dB to 0.9 / 0.7 dB, at
-    /// a cost of 0.4 / 1.2 dB refined deblurring (BENCHMARKS.md, "Quality").
+    /// a cost of 0.4 / 1.2 dB refined deblurring (lr 3e-3, final factor 0.2; BENCHMARKS.md,
+    /// "Quality"). On the held-out seed the new pose defaults together cut that gap from 5.0 to
+    /// 3.5 dB when training starts from ground-truth poses.
     pub off_centre_weight: f64,
 }
 
