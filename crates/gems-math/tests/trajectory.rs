@@ -224,16 +224,18 @@ fn times(n: usize) -> Vec<f64> {
     (0..n).map(|k| k as f64 / (n - 1) as f64).collect()
 }
 
-/// The uneven-speed energy's knot gradient against central finite differences of the energy,
-/// for every trajectory kind.
-#[test]
-fn uneven_speed_gradient_matches_finite_differences() {
+/// A knot-gradient regulariser's signature: (trajectory, times, weight, knot gradients) → energy.
+type KnotEnergy = fn(&Trajectory, &[f64], f64, &mut [[f64; 6]]) -> f64;
+
+/// Checks `energy`'s knot gradient against central finite differences of the energy, for every
+/// trajectory kind, at weight 1.5 on 7 evenly spaced times.
+fn assert_knot_gradient_matches_finite_differences(energy_of: KnotEnergy) {
     let ts = times(7);
     for kind in all_kinds() {
         let k0 = knots(kind.default_knots(), 0.2);
         let t = Trajectory::new(kind, k0.clone()).unwrap();
         let mut grad = vec![[0.0; 6]; k0.len()];
-        let e = uneven_speed_energy(&t, &ts, 1.5, &mut grad);
+        let e = energy_of(&t, &ts, 1.5, &mut grad);
         assert!(e > 0.0);
         let h = 1e-6;
         for j in 0..k0.len() {
@@ -242,7 +244,7 @@ fn uneven_speed_gradient_matches_finite_differences() {
                     let mut k = k0.clone();
                     k[j][c] += d;
                     let t = Trajectory::new(kind, k).unwrap();
-                    uneven_speed_energy(&t, &ts, 1.5, &mut vec![[0.0; 6]; k0.len()])
+                    energy_of(&t, &ts, 1.5, &mut vec![[0.0; 6]; k0.len()])
                 };
                 let fd = (energy(h) - energy(-h)) / (2.0 * h);
                 assert!(
@@ -253,6 +255,13 @@ fn uneven_speed_gradient_matches_finite_differences() {
             }
         }
     }
+}
+
+/// The uneven-speed energy's knot gradient against central finite differences of the energy,
+/// for every trajectory kind.
+#[test]
+fn uneven_speed_gradient_matches_finite_differences() {
+    assert_knot_gradient_matches_finite_differences(uneven_speed_energy);
 }
 
 /// Along one straight path, evenly spaced poses have less energy than the same path walked
@@ -283,31 +292,7 @@ fn uneven_speed_energy_is_smallest_for_even_spacing() {
 /// every trajectory kind.
 #[test]
 fn off_centre_gradient_matches_finite_differences() {
-    let ts = times(7);
-    for kind in all_kinds() {
-        let k0 = knots(kind.default_knots(), 0.2);
-        let t = Trajectory::new(kind, k0.clone()).unwrap();
-        let mut grad = vec![[0.0; 6]; k0.len()];
-        let e = off_centre_energy(&t, &ts, 1.5, &mut grad);
-        assert!(e > 0.0);
-        let h = 1e-6;
-        for j in 0..k0.len() {
-            for c in 0..6 {
-                let energy = |d: f64| {
-                    let mut k = k0.clone();
-                    k[j][c] += d;
-                    let t = Trajectory::new(kind, k).unwrap();
-                    off_centre_energy(&t, &ts, 1.5, &mut vec![[0.0; 6]; k0.len()])
-                };
-                let fd = (energy(h) - energy(-h)) / (2.0 * h);
-                assert!(
-                    (fd - grad[j][c]).abs() < 1e-6 * (1.0 + fd.abs()),
-                    "{kind:?} knot {j} coordinate {c}: analytic {} vs finite difference {fd}",
-                    grad[j][c]
-                );
-            }
-        }
-    }
+    assert_knot_gradient_matches_finite_differences(off_centre_energy);
 }
 
 /// A path walked at even speed along a line has its middle on the mean of its poses (no

@@ -74,9 +74,7 @@ fn same_seed_same_result_and_resume_is_bit_identical() {
         };
         let mut t = trainer(&cfg);
         t.run(|_, _| Ok(())).unwrap();
-        let times: Vec<f64> = (0..cfg.num_virtual_views)
-            .map(|k| k as f64 / (cfg.num_virtual_views - 1) as f64)
-            .collect();
+        let times = cfg.virtual_times();
         (0..t.views().len())
             .map(|v| {
                 let traj = t.trajectory(v);
