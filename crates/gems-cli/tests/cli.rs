@@ -844,6 +844,10 @@ fn bench_quality_writes_the_four_rows() {
         runs[2],
         runs[1]
     );
+    // Each row also gives the APE of the poses it started from: zero from the ground truth.
+    let ape_init = |r: usize| runs[r]["ape_init_rmse"].as_f64().unwrap();
+    assert!(ape_init(2) < 1e-9 && ape_init(1) > 0.0, "{}", runs[1]);
+    assert!(rows[2].contains(" → "), "{}", rows[2]);
     let sharp = out.join("seed3/sharp");
     let scene = out.join("seed3/scene");
     for e in std::fs::read_dir(scene.join("images_test")).unwrap() {

@@ -12,7 +12,8 @@
 //!   after refinement from their initial pose, the GeMS authors' figure), `nvs` (held-out views
 //!   with refinement), `nvs_no_pose_opt` (held-out views at their initial pose) and APE
 //!   ([`ape_of_centres`]: Sim(3) Umeyama of midpoint camera centres to the ground truth, evo's
-//!   statistics, in the input frame's units). The result serialises to `metrics.json`
+//!   statistics, in the input frame's units; `ape_init` the same for the initial poses, so the
+//!   pair shows what training did to the cameras). The result serialises to `metrics.json`
 //!   ([`MetricsReport`], [`write_metrics_json`]).
 //! - [`tum`]: TUM trajectory files; [`write_trajectories`] writes every view's n virtual poses
 //!   plus the midpoints (and ground truth when known), in the input frame.

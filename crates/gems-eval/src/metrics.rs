@@ -90,7 +90,12 @@ pub struct MetricsReport {
     pub nvs: Option<SplitScores>,
     /// Held-out views at their initial poses.
     pub nvs_no_pose_opt: Option<SplitScores>,
+    /// APE of the training views' trajectory midpoints (the poses gems reports).
     pub ape: Option<ApeSummary>,
+    /// APE of the training views' initial poses (the initialisation's, before training), so
+    /// `ape` reads as how far training moved the cameras toward the truth.
+    #[serde(default)]
+    pub ape_init: Option<ApeSummary>,
     pub steps: usize,
     pub seconds: f64,
     pub gaussians: usize,

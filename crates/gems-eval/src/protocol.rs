@@ -12,7 +12,7 @@ use gems_train::TrainOutput;
 
 use crate::EvalError;
 use crate::metrics::{
-    EvalView, MetricsReport, PoseMode, SplitResult, SplitScores, ape_of_centres,
+    ApeSummary, EvalView, MetricsReport, PoseMode, SplitResult, SplitScores, ape_of_centres,
     evaluate_views_with_progress, score_image,
 };
 use crate::refine::PoseRefineConfig;
@@ -127,18 +127,8 @@ pub fn evaluate_output_on(
     let nvs_no_pose_opt = run(&held, PoseMode::AsGiven)?;
     let nvs = run(&held, PoseMode::Refine(*refine))?;
     let deblur_refined = run(&train_views, PoseMode::Refine(*refine))?;
-    let (est, gt) = midpoint_and_gt_centres(output);
-    let ape = if est.len() < 3 {
-        None
-    } else {
-        match ape_of_centres(&est, &gt) {
-            Ok(a) => Some(a),
-            Err(e) => {
-                tracing::warn!("APE not computed: {e}");
-                None
-            }
-        }
-    };
+    let ape = ape_if_known(midpoint_and_gt_centres(output));
+    let ape_init = ape_if_known(centres_and_gt(output, |v| &v.c2w_init));
     let input = input_scores(output, data, &deblur_views, lpips)?;
     let metrics = MetricsReport {
         deblur: deblur.scores.clone(),
@@ -147,6 +137,7 @@ pub fn evaluate_output_on(
         nvs: nvs.scores.clone(),
         nvs_no_pose_opt: nvs_no_pose_opt.scores.clone(),
         ape,
+        ape_init,
         steps: output.steps,
         seconds: output.seconds,
         gaussians: gaussians.len(),
@@ -189,17 +180,37 @@ fn input_scores(
 /// Midpoint camera centres and ground-truth centres, in the input frame, of the views whose
 /// ground-truth pose is known.
 pub fn midpoint_and_gt_centres(output: &TrainOutput) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+    centres_and_gt(output, |v| &v.mid_c2w)
+}
+
+/// The camera centres of `pose(view)` and of the ground truth, in the input frame, for the
+/// training views with ground truth.
+fn centres_and_gt(
+    output: &TrainOutput,
+    pose: impl Fn(&gems_train::ViewResult) -> &gems_math::Pose,
+) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
     let norm = &output.normalization;
     output
         .views
         .iter()
         .filter_map(|v| {
             let gt = v.c2w_gt.as_ref()?;
-            let est: [f64; 3] = norm.invert_point(&se3(&v.mid_c2w).trans).into();
+            let est: [f64; 3] = norm.invert_point(&se3(pose(v)).trans).into();
             let gt: [f64; 3] = norm.invert_point(&se3(gt).trans).into();
             Some((est, gt))
         })
         .unzip()
+}
+
+/// APE of `(estimated, ground-truth)` centres; `None` (with a warning when the alignment fails)
+/// for fewer than 3 views with ground truth.
+fn ape_if_known((est, gt): (Vec<[f64; 3]>, Vec<[f64; 3]>)) -> Option<ApeSummary> {
+    if est.len() < 3 {
+        return None;
+    }
+    ape_of_centres(&est, &gt)
+        .inspect_err(|e| tracing::warn!("APE not computed: {e}"))
+        .ok()
 }
 
 /// A file-name-safe stem of a view name ("images/0001.png" → "0001").

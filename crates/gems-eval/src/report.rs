@@ -423,6 +423,13 @@ fn metrics_section(html: &mut String, m: &MetricsReport) {
                  <p>RMSE {:.5}, mean {:.5}, median {:.5}, std {:.5}, max {:.5}</p>",
                 a.rmse, a.mean, a.median, a.std, a.max
             );
+            if let Some(i) = &m.ape_init {
+                let _ = writeln!(
+                    html,
+                    "<p>The initial poses (before training): RMSE {:.5}, mean {:.5}, max {:.5}.</p>",
+                    i.rmse, i.mean, i.max
+                );
+            }
         }
         None => html.push_str("<h3>APE</h3><p>Not available (no ground-truth poses).</p>\n"),
     }

@@ -64,6 +64,13 @@ fn metrics_json_round_trip_and_keys() {
             std: 0.02,
             max: 0.2,
         }),
+        ape_init: Some(ApeSummary {
+            rmse: 0.3,
+            mean: 0.25,
+            median: 0.2,
+            std: 0.1,
+            max: 0.6,
+        }),
         steps: 7000,
         seconds: 12.5,
         gaussians: 1234,
@@ -81,6 +88,7 @@ fn metrics_json_round_trip_and_keys() {
         "nvs",
         "nvs_no_pose_opt",
         "ape",
+        "ape_init",
         "steps",
         "seconds",
         "gaussians",
@@ -93,6 +101,7 @@ fn metrics_json_round_trip_and_keys() {
     }
     for key in ["rmse", "mean", "median", "std", "max"] {
         assert!(v["ape"][key].is_number(), "missing ape.{key}");
+        assert!(v["ape_init"][key].is_number(), "missing ape_init.{key}");
     }
     // A perfect render's infinite PSNR survives the JSON round trip (written as null).
     let mut perfect = report;
@@ -188,6 +197,7 @@ fn report_writes_html_and_figures() {
         nvs: None,
         nvs_no_pose_opt: None,
         ape: None,
+        ape_init: None,
         steps: 10,
         seconds: 1.0,
         gaussians: 5,

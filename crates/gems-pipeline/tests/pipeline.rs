@@ -54,6 +54,12 @@ fn tiny_scene_end_to_end_from_rust() {
         deblur.psnr
     );
     assert!(metrics.ape.is_some(), "ground-truth poses give an APE");
+    // Trained from the ground-truth poses: the initial poses are the truth.
+    assert!(
+        metrics.ape_init.unwrap().rmse < 1e-9,
+        "{:?}",
+        metrics.ape_init
+    );
 }
 
 #[test]

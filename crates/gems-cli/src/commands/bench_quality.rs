@@ -62,6 +62,8 @@ struct Row {
     nvs_refined: Option<f64>,
     nvs_initial: Option<f64>,
     ape_rmse: Option<f64>,
+    /// APE of the initial poses the run trained from.
+    ape_init_rmse: Option<f64>,
     seconds: Option<f64>,
     /// Why the run has no figures (e.g. the SfM failed).
     failure: Option<String>,
@@ -77,6 +79,7 @@ impl Row {
             nvs_refined: m.nvs.as_ref().map(|s| s.psnr),
             nvs_initial: m.nvs_no_pose_opt.as_ref().map(|s| s.psnr),
             ape_rmse: m.ape.as_ref().map(|a| a.rmse),
+            ape_init_rmse: m.ape_init.as_ref().map(|a| a.rmse),
             seconds: Some(seconds),
             failure: None,
         }
@@ -91,6 +94,7 @@ impl Row {
             nvs_refined: None,
             nvs_initial: None,
             ape_rmse: None,
+            ape_init_rmse: None,
             seconds: None,
             failure: Some(why),
         }
@@ -258,7 +262,7 @@ fn markdown(rows: &[Row], args: &Args) -> String {
     let f = |v: Option<f64>, unit: &str| v.map_or("—".to_owned(), |v| format!("{v:.2}{unit}"));
     let mut s = format!(
         "Schedule: {} steps; scenes: `gems synth --preset {}`{}, seeds {:?}.\n\n\
-         | seed | run | deblur midpoint | deblur refined | novel views refined | novel views at initial pose | APE RMSE | wall time |\n\
+         | seed | run | deblur midpoint | deblur refined | novel views refined | novel views at initial pose | APE RMSE (initial → trained) | wall time |\n\
          |---|---|---|---|---|---|---|---|\n",
         args.steps,
         format!("{:?}", args.preset).to_lowercase(),
@@ -281,7 +285,11 @@ fn markdown(rows: &[Row], args: &Args) -> String {
             f(r.deblur_refined, " dB"),
             f(r.nvs_refined, " dB"),
             f(r.nvs_initial, " dB"),
-            r.ape_rmse.map_or("—".to_owned(), |v| format!("{v:.4}")),
+            match (r.ape_init_rmse, r.ape_rmse) {
+                (Some(i), Some(t)) => format!("{i:.4} → {t:.4}"),
+                (None, Some(t)) => format!("{t:.4}"),
+                _ => "—".to_owned(),
+            },
             f(r.seconds, " s"),
         ));
     }

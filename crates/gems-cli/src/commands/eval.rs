@@ -128,6 +128,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ),
         None => println!("APE: n/a (no ground-truth poses)"),
     }
+    if let Some(a) = eval.metrics.ape_init {
+        println!("APE of the initial poses: rmse {:.5}", a.rmse);
+    }
     println!("report: {}", report.display());
     Ok(())
 }

@@ -25,7 +25,8 @@ pub fn open_engine(device: DeviceChoice) -> anyhow::Result<Engine> {
     Ok(engine)
 }
 
-/// One line per split a run evaluated: PSNR and SSIM.
+/// One line per split a run evaluated (PSNR and SSIM), and the camera-centre APE of the initial
+/// and the trained poses when the scene has ground truth.
 pub fn print_splits(m: &gems_eval::MetricsReport) {
     for (label, split) in [
         ("blurry input", &m.input),
@@ -37,5 +38,11 @@ pub fn print_splits(m: &gems_eval::MetricsReport) {
         if let Some(s) = split {
             println!("{label}: PSNR {:.2} dB, SSIM {:.4}", s.psnr, s.ssim);
         }
+    }
+    if let Some(a) = &m.ape {
+        let init = m
+            .ape_init
+            .map_or(String::new(), |i| format!(" (initial poses {:.4})", i.rmse));
+        println!("APE RMSE of the trajectory midpoints: {:.4}{init}", a.rmse);
     }
 }
