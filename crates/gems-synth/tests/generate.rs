@@ -474,6 +474,30 @@ fn events_encode_the_log_intensity_change_of_the_exposure() {
     }
 }
 
+/// Cases where the calibration used to stop short. Seed 197 at 77.5 px (found by the property
+/// below): the proportional correction overshot back and forth (59.5 → 86.6 → 73.6 → 79.4 →
+/// 76.7 px) and stopped 1.1 % short. Seed 145 at 79.9 px: one view's blur jumps from 75.9 to
+/// 84.3 px between two nearby scales (scene points pass behind the camera), so no scale of that
+/// motion reaches the target and another motion must be drawn.
+#[test]
+fn calibration_converges_where_proportional_steps_oscillate_or_the_blur_jumps() {
+    for (seed, blur) in [(197, 77.54899460797411), (145, 79.9)] {
+        let scene = SynthScene::new(&SynthConfig {
+            seed,
+            blur_px: blur,
+            ..SynthConfig::tiny()
+        })
+        .unwrap();
+        for v in &scene.views {
+            assert!(
+                (v.blur_px / blur - 1.0).abs() < 0.01,
+                "seed {seed}: achieved {} for {blur}",
+                v.blur_px
+            );
+        }
+    }
+}
+
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
     /// Calibration reaches the requested blur for any seed and blur strength (no rendering).
