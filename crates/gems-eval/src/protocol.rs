@@ -127,7 +127,7 @@ pub fn evaluate_output_on(
     let nvs_no_pose_opt = run(&held, PoseMode::AsGiven)?;
     let nvs = run(&held, PoseMode::Refine(*refine))?;
     let deblur_refined = run(&train_views, PoseMode::Refine(*refine))?;
-    let ape = ape_if_known(midpoint_and_gt_centres(output));
+    let ape = ape_if_known(centres_and_gt(output, |v| &v.mid_c2w));
     let ape_init = ape_if_known(centres_and_gt(output, |v| &v.c2w_init));
     let input = input_scores(output, data, &deblur_views, lpips)?;
     let metrics = MetricsReport {
@@ -177,14 +177,8 @@ fn input_scores(
     Ok(SplitScores::from_images(per_image))
 }
 
-/// Midpoint camera centres and ground-truth centres, in the input frame, of the views whose
-/// ground-truth pose is known.
-pub fn midpoint_and_gt_centres(output: &TrainOutput) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
-    centres_and_gt(output, |v| &v.mid_c2w)
-}
-
-/// The camera centres of `pose(view)` and of the ground truth, in the input frame, for the
-/// training views with ground truth.
+/// The camera centres of `pose(view)` (the trajectory midpoint, or the initial pose) and of the
+/// ground truth, in the input frame, for the training views whose ground-truth pose is known.
 fn centres_and_gt(
     output: &TrainOutput,
     pose: impl Fn(&gems_train::ViewResult) -> &gems_math::Pose,
