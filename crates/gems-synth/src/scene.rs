@@ -75,26 +75,8 @@ impl SynthScene {
                 } else {
                     (pct(0.001), pct(0.999), pct(0.5))
                 };
-                let target = config.blur_px;
-                let mut best: Option<(ExposureMotion, f64)> = None;
-                for _ in 0..MOTION_DRAWS {
-                    let mut motion = ExposureMotion::random(&mut rng, median);
-                    let blur = calibrate(&mut motion, &mid, &points, &intrinsics, target);
-                    let err = |b: f64| {
-                        if target > 0.0 {
-                            (b / target - 1.0).abs()
-                        } else {
-                            b
-                        }
-                    };
-                    if best.as_ref().is_none_or(|(_, b)| err(blur) < err(*b)) {
-                        best = Some((motion, blur));
-                    }
-                    if err(blur) < BLUR_TOLERANCE {
-                        break;
-                    }
-                }
-                let (motion, blur_px) = best.expect("at least one motion is drawn");
+                let (motion, blur_px) =
+                    calibrated_motion(&mut rng, median, &mid, &points, &intrinsics, config.blur_px);
                 ViewTruth {
                     mid,
                     motion,
@@ -303,6 +285,38 @@ pub(crate) fn curve_blur_px(
     mean_path_length_px(points, k, &poses)
 }
 
+/// A random exposure motion for the view at `mid` scaled to `target` px of blur, and the blur
+/// it achieves. The blur is not continuous in the motion's scale (a scene point that passes
+/// behind the camera during the exposure leaves the mean), so the target can fall in a jump that
+/// no scale of one motion reaches; then up to [`MOTION_DRAWS`] motions are drawn and the closest
+/// kept. A view with nothing to blur (no target, no scene points) takes the first draw.
+fn calibrated_motion(
+    rng: &mut ChaCha8Rng,
+    median_depth: f64,
+    mid: &CameraPose,
+    points: &[[f64; 3]],
+    k: &Intrinsics,
+    target: f64,
+) -> (ExposureMotion, f64) {
+    let mut motion = ExposureMotion::random(rng, median_depth);
+    let mut blur = calibrate(&mut motion, mid, points, k, target);
+    if target == 0.0 || points.is_empty() {
+        return (motion, blur);
+    }
+    let err = |b: f64| (b / target - 1.0).abs();
+    for _ in 1..MOTION_DRAWS {
+        if err(blur) < BLUR_TOLERANCE {
+            break;
+        }
+        let mut other = ExposureMotion::random(rng, median_depth);
+        let b = calibrate(&mut other, mid, points, k, target);
+        if err(b) < err(blur) {
+            (motion, blur) = (other, b);
+        }
+    }
+    (motion, blur)
+}
+
 /// Scales `motion` so the blur is `target` px; returns the achieved blur. The path length is
 /// nearly proportional to the scale (exactly so for pure rotation about the centre), so
 /// [`PROPORTIONAL_STEPS`] proportional corrections usually converge to well under 1 %. At long
@@ -347,9 +361,7 @@ const PROPORTIONAL_STEPS: usize = 6;
 /// Blur evaluations [`calibrate`] may spend on one motion.
 const CALIBRATION_STEPS: usize = 48;
 
-/// Random motions drawn for one view at most. The blur is not continuous in the motion's scale
-/// (a scene point that passes behind the camera during the exposure leaves the mean), so the
-/// target can fall in a jump that no scale of one motion reaches; another motion is then drawn.
+/// Random motions [`calibrated_motion`] draws for one view at most.
 const MOTION_DRAWS: usize = 8;
 
 /// Relative blur error at which a motion is redrawn.
