@@ -228,20 +228,40 @@ pub fn uneven_speed_energy(
     weight * energy
 }
 
-/// Off-centre energy of the poses Δ(u_k) at `times`: ‖Log Δ(½) − (1/n) Σ_k Log Δ(u_k)‖².
+/// Which pose of an exposure's set [`off_centre_energy`] holds the trajectory's u = ½ on. In
+/// configuration files: `median` or `mean`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PathCentre {
+    /// The mean (1/n) Σ_k Log Δ(u_k): the middle of a straight path walked at even speed, but
+    /// inside the bend of a curved one and toward the slow end of an uneven one.
+    Mean,
+    /// The median of the poses ordered along the set's principal direction: the middle in time
+    /// of any path that moves steadily along that direction, curved or uneven in speed.
+    Median,
+}
+
+/// Off-centre energy of the poses Δ(u_k) at `times`: ‖Log Δ(½) − c‖², where c is the set's
+/// `centre` in the tangent space, [`PathCentre::Mean`] or [`PathCentre::Median`].
 ///
 /// The blur model averages the renders and so sees the exposure's poses only as a set: the
 /// order along the path is free, and the pose at u = ½, which gems reports as the sharp
 /// mid-exposure view, can drift to one end of the set (a hooked path that dwells or folds). The
-/// set's mean, unlike its order, is fixed by the blurry image. This energy pulls Δ(½) onto that
-/// mean, the mid-exposure pose of a camera moving at even speed along a straight path, without
-/// pulling the path shorter (a rigid shift of the whole set leaves it unchanged).
+/// set, unlike its order, is fixed by the blurry image, and so is its centre. This energy pulls
+/// Δ(½) onto that centre without pulling the path shorter (a rigid shift of the whole set leaves
+/// the mean's residual unchanged; the median's is zero on any path that moves steadily).
+///
+/// The median orders the poses by their projection on the principal axis of the logs, with the
+/// translation and rotation blocks each scaled to unit spread so that neither unit dominates;
+/// for an even count it is the mean of the two middle logs. Which poses are the median is held
+/// fixed for the gradient (it is piecewise constant in the knots).
 ///
 /// Adds `weight` × its gradient with respect to the knots to `knot_grads` (one [ρ; φ] per knot,
 /// as [`Trajectory::accumulate_knot_gradients`]) and returns `weight` × the energy.
 pub fn off_centre_energy(
     traj: &Trajectory,
     times: &[f64],
+    centre: PathCentre,
     weight: f64,
     knot_grads: &mut [[f64; 6]],
 ) -> f64 {
@@ -250,19 +270,70 @@ pub fn off_centre_energy(
     }
     let mid = traj.eval(0.5).log();
     let logs: Vec<Vector6<f64>> = times.iter().map(|&u| traj.eval(u).log()).collect();
-    let inv_n = 1.0 / times.len() as f64;
-    let r = mid - logs.iter().sum::<Vector6<f64>>() * inv_n;
+    // The centre as weights on the logs: c = Σ_k w_k ξ_k.
+    let centre_weights = match centre {
+        PathCentre::Mean => vec![1.0 / times.len() as f64; times.len()],
+        PathCentre::Median => median_weights(&logs),
+    };
+    let c: Vector6<f64> = logs
+        .iter()
+        .zip(&centre_weights)
+        .map(|(xi, &w)| xi * w)
+        .sum();
+    let r = mid - c;
     // d Log(Δ Exp(δ)) / dδ = J_r⁻¹(Log Δ), so dE/dδ = J_r⁻¹ᵀ ∂E/∂ξ with ∂E/∂ξ_mid = 2r and
-    // ∂E/∂ξ_k = −2r/n.
+    // ∂E/∂ξ_k = −2 w_k r.
     let mut add = |u: f64, xi: &Vector6<f64>, d_xi: Vector6<f64>| {
         let g = se3_right_jacobian_inv(xi).transpose() * d_xi * weight;
         traj.accumulate_knot_gradients(u, &std::array::from_fn(|i| g[i]), knot_grads);
     };
     add(0.5, &mid, r * 2.0);
-    for (&u, xi) in times.iter().zip(&logs) {
-        add(u, xi, r * (-2.0 * inv_n));
+    for ((&u, xi), &w) in times.iter().zip(&logs).zip(&centre_weights) {
+        if w != 0.0 {
+            add(u, xi, r * (-2.0 * w));
+        }
     }
     weight * r.norm_squared()
+}
+
+/// Weights that pick the median of `logs` along their principal axis: 1 on the middle pose, or
+/// ½ on each of the two middle poses of an even count.
+fn median_weights(logs: &[Vector6<f64>]) -> Vec<f64> {
+    let n = logs.len();
+    let mean: Vector6<f64> = logs.iter().sum::<Vector6<f64>>() / n as f64;
+    // Each block (translation ρ, rotation φ) scaled to unit RMS spread; a block that does not
+    // move is left at zero rather than blown up.
+    let spread = |block: usize| {
+        let ms = logs
+            .iter()
+            .map(|xi| (xi - mean).fixed_rows::<3>(3 * block).norm_squared())
+            .sum::<f64>()
+            / n as f64;
+        if ms > 1e-24 { 1.0 / ms.sqrt() } else { 0.0 }
+    };
+    let scale = [spread(0), spread(1)];
+    let centred: Vec<Vector6<f64>> = logs
+        .iter()
+        .map(|xi| Vector6::from_fn(|i, _| (xi[i] - mean[i]) * scale[i / 3]))
+        .collect();
+    let cov: Matrix6<f64> = centred.iter().map(|y| y * y.transpose()).sum();
+    let eig = cov.symmetric_eigen();
+    let axis = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| {
+        centred[a]
+            .dot(&axis)
+            .total_cmp(&centred[b].dot(&axis))
+            .then(a.cmp(&b))
+    });
+    let mut w = vec![0.0; n];
+    if n % 2 == 1 {
+        w[order[n / 2]] = 1.0;
+    } else {
+        w[order[n / 2 - 1]] = 0.5;
+        w[order[n / 2]] = 0.5;
+    }
+    w
 }
 
 fn bezier_with_jacobians(knots: &[[f64; 6]], u: f64) -> (Se3, Vec<Jacobian6>) {

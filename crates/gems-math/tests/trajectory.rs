@@ -289,28 +289,87 @@ fn uneven_speed_energy_is_smallest_for_even_spacing() {
 }
 
 /// The off-centre energy's knot gradient against central finite differences of the energy, for
-/// every trajectory kind.
+/// every trajectory kind and both centres (the median's choice of poses is constant near these
+/// knots).
 #[test]
 fn off_centre_gradient_matches_finite_differences() {
-    assert_knot_gradient_matches_finite_differences(off_centre_energy);
+    assert_knot_gradient_matches_finite_differences(|t, ts, w, g| {
+        off_centre_energy(t, ts, PathCentre::Mean, w, g)
+    });
+    // Even paths have their median at u = ½ (no energy): sample them unevenly.
+    assert_knot_gradient_matches_finite_differences(|t, ts, w, g| {
+        let uneven: Vec<f64> = ts.iter().map(|u| u * u).collect();
+        off_centre_energy(t, &uneven, PathCentre::Median, w, g)
+    });
 }
 
-/// A path walked at even speed along a line has its middle on the mean of its poses (no
-/// energy, whatever its length); the same segment walked with u² timing, or folded back on
-/// itself, has its u = ½ pose off that mean; weight 0 adds nothing.
+/// A path walked at even speed along a line has its middle on the mean and the median of its
+/// poses (no energy, whatever its length); the same segment walked with u² timing has its
+/// u = ½ pose off both, and so does a path that folds back at u = ½; weight 0 adds nothing.
 #[test]
 fn off_centre_energy_vanishes_only_for_a_centred_path() {
     let line = |a: f64| -> [f64; 6] { [a, 0.5 * a, 0.0, 0.0, 0.0, 0.0] };
-    let ts = times(9);
     let even = Trajectory::new(TrajectoryKind::Linear, vec![line(-0.3), line(0.3)]).unwrap();
+    for centre in [PathCentre::Mean, PathCentre::Median] {
+        for ts in [times(9), times(8)] {
+            let mut g = vec![[0.0; 6]; 2];
+            assert!(off_centre_energy(&even, &ts, centre, 1.0, &mut g) < 1e-24);
+            assert!(g.iter().flatten().all(|x| x.abs() < 1e-12), "{g:?}");
+            let bunched: Vec<f64> = ts.iter().map(|u| u * u).collect();
+            assert!(off_centre_energy(&even, &bunched, centre, 1.0, &mut [[0.0; 6]; 2]) > 1e-3);
+            // Pure translations compose additively: x(u) = 4·0.3·u(1 − u), out and back.
+            let folded =
+                Trajectory::new(TrajectoryKind::Bezier, vec![[0.0; 6], line(0.6), [0.0; 6]])
+                    .unwrap();
+            let e = off_centre_energy(&folded, &ts, centre, 1.0, &mut [[0.0; 6]; 3]);
+            assert!(e > 1e-3, "{centre:?} {e}");
+            let mut zero = vec![[0.0; 6]; 2];
+            assert_eq!(
+                off_centre_energy(&even, &bunched, centre, 0.0, &mut zero),
+                0.0
+            );
+            assert_eq!(zero, vec![[0.0; 6]; 2]);
+        }
+    }
+}
+
+/// On a curved path walked at even speed (a cubic Bézier whose inner knots bend it sideways, the
+/// shape of `gems synth`'s exposures), and on a straight one walked at uneven speed, u = ½ is
+/// the median of the poses but not their mean: the mean lies inside the bend, or toward the slow
+/// end.
+#[test]
+fn the_median_is_the_middle_of_curved_and_uneven_paths() {
+    let ts = times(15);
+    // Bézier knots are a product of Exp(b_j ξ_j): a path that sweeps along x and bends along y
+    // in translation and rotation alike.
+    let bent = Trajectory::new(
+        TrajectoryKind::Bezier,
+        vec![
+            [-0.3, 0.0, 0.0, 0.0, -0.2, 0.0],
+            [0.2, 0.25, 0.0, 0.15, 0.1, 0.0],
+            [0.2, -0.25, 0.0, -0.15, 0.1, 0.0],
+            [0.2, 0.0, 0.0, 0.0, 0.1, 0.0],
+        ],
+    )
+    .unwrap();
+    let mut g = vec![[0.0; 6]; 4];
+    let median = off_centre_energy(&bent, &ts, PathCentre::Median, 1.0, &mut g);
+    let mean = off_centre_energy(&bent, &ts, PathCentre::Mean, 1.0, &mut [[0.0; 6]; 4]);
+    assert!(median < 1e-24, "median {median}");
+    assert!(mean > 1e-4, "mean {mean}");
+    // A straight path, its poses at u^1.5: faster toward the end, monotone.
+    let line = |a: f64| -> [f64; 6] { [a, 0.5 * a, 0.0, 0.0, 0.1 * a, 0.0] };
+    let straight = Trajectory::new(TrajectoryKind::Linear, vec![line(-0.3), line(0.3)]).unwrap();
+    let uneven: Vec<f64> = ts.iter().map(|u: &f64| u.powf(1.5)).collect();
+    let mid_time = uneven[7];
+    // Re-time the path so that its pose at u = ½ is the one at the middle sample.
+    let shifted: Vec<f64> = uneven
+        .iter()
+        .map(|u| (u - mid_time + 0.5).clamp(0.0, 1.0))
+        .collect();
     let mut g = vec![[0.0; 6]; 2];
-    assert!(off_centre_energy(&even, &ts, 1.0, &mut g) < 1e-24);
-    assert!(g.iter().flatten().all(|x| x.abs() < 1e-12), "{g:?}");
-    let bunched: Vec<f64> = ts.iter().map(|u| u * u).collect();
-    assert!(off_centre_energy(&even, &bunched, 1.0, &mut [[0.0; 6]; 2]) > 1e-3);
-    let folded: Vec<f64> = ts.iter().map(|u| 1.0 - (2.0 * u - 1.0).abs()).collect();
-    assert!(off_centre_energy(&even, &folded, 1.0, &mut [[0.0; 6]; 2]) > 1e-3);
-    let mut zero = vec![[0.0; 6]; 2];
-    assert_eq!(off_centre_energy(&even, &bunched, 0.0, &mut zero), 0.0);
-    assert_eq!(zero, vec![[0.0; 6]; 2]);
+    let median = off_centre_energy(&straight, &shifted, PathCentre::Median, 1.0, &mut g);
+    let mean = off_centre_energy(&straight, &shifted, PathCentre::Mean, 1.0, &mut g);
+    assert!(median < 1e-24, "median {median}");
+    assert!(mean > 1e-4, "mean {mean}");
 }

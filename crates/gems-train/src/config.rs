@@ -91,6 +91,9 @@ pub struct PoseConfig {
     /// "Quality"). On the held-out seed the new pose defaults together cut that gap from 5.0 to
     /// 3.5 dB when training starts from ground-truth poses.
     pub off_centre_weight: f64,
+    /// Which centre of the exposure's poses the off-centre energy holds u = ½ on: `mean` or
+    /// `median` ([`gems_math::PathCentre`]).
+    pub off_centre_target: gems_math::PathCentre,
 }
 
 impl Default for PoseConfig {
@@ -104,6 +107,7 @@ impl Default for PoseConfig {
             knot_init_std: 1e-5,
             uneven_speed_weight: 0.0,
             off_centre_weight: 10.0,
+            off_centre_target: gems_math::PathCentre::Mean,
         }
     }
 }

@@ -453,6 +453,7 @@ impl Trainer {
             loss += gems_math::off_centre_energy(
                 &traj,
                 &self.times,
+                self.cfg.pose.off_centre_target,
                 self.cfg.pose.off_centre_weight,
                 &mut self.knot_grads,
             ) as f32;

@@ -59,6 +59,12 @@ fn same_seed_same_result_and_resume_is_bit_identical() {
     free.pose.off_centre_weight = 0.0;
     let c = check_same_seed_and_resume(&free);
     assert_ne!(a.knots, c.knots);
+    // Centred on the median instead of the mean of the poses: the same guarantees (the median's
+    // choice of poses is deterministic), and other trajectories.
+    let mut median = small_config();
+    median.pose.off_centre_target = gems_math::PathCentre::Median;
+    let d = check_same_seed_and_resume(&median);
+    assert_ne!(a.knots, d.knots);
     // From wide random paths, the energy's weight brings u = ½ nearer the mean pose.
     let mut wide = small_config();
     wide.pose.knot_init_std = 0.05;
@@ -79,7 +85,7 @@ fn same_seed_same_result_and_resume_is_bit_identical() {
             .map(|v| {
                 let traj = t.trajectory(v);
                 let mut g = vec![[0.0; 6]; traj.num_knots()];
-                gems_math::off_centre_energy(&traj, &times, 1.0, &mut g)
+                gems_math::off_centre_energy(&traj, &times, cfg.pose.off_centre_target, 1.0, &mut g)
             })
             .sum()
     };
