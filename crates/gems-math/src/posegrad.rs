@@ -2,9 +2,9 @@
 //!
 //! The renderer's camera is world-to-camera (R, t) and it returns dL/dR (3×3) and dL/dt. For a
 //! LEFT perturbation ε = [ρ; φ] of world-to-camera, w2c ← Exp(ε)·w2c, to first order
-//! R ← (I + [φ]×) R and t ← (I + [φ]×) t + ρ, so
+//! R ← (I + \[φ\]×) R and t ← (I + \[φ\]×) t + ρ, so
 //!   dL/dρ = dL/dt,   dL/dφ = vee-gradient of A = (dL/dR) Rᵀ + (dL/dt) tᵀ,
-//! where ⟨A, [φ]×⟩ = φ · (A₃₂ − A₂₃, A₁₃ − A₃₁, A₂₁ − A₁₂).
+//! where ⟨A, \[φ\]×⟩ = φ · (A₃₂ − A₂₃, A₁₃ − A₃₁, A₂₁ − A₁₂).
 //!
 //! For a RIGHT perturbation δ of camera-to-world, c2w ← c2w·Exp(δ) ⇔ w2c ← Exp(−δ)·w2c, so
 //! dL/dδ = −dL/dε ([`c2w_right_perturbation_gradient`]). That is the quantity to feed to

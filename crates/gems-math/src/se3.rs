@@ -81,7 +81,7 @@ impl Se3 {
         join_tangent(&rho, &phi)
     }
 
-    /// Adjoint: T · Exp(δ) = Exp(Ad_T δ) · T. Ad_T = [[R, [t]×R], [0, R]] for [ρ; φ] ordering.
+    /// Adjoint: T · Exp(δ) = Exp(Ad_T δ) · T. Ad_T = [[R, \[t\]×R], [0, R]] for [ρ; φ] ordering.
     pub fn adjoint(&self) -> Matrix6<f64> {
         let mut m = Matrix6::zeros();
         m.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.rot);
