@@ -97,8 +97,8 @@ pub struct PoseConfig {
     /// exposures the true poses' mean projects 2.5 px RMS from the mid-exposure pose at 27 px
     /// of blur). Default `mean`: the median at weight 50 raised the midpoint deblurring from
     /// ground-truth poses by +0.4 dB (tuning seed, 1000 steps) and +0.5 dB (held-out seed,
-    /// 3000 steps), but lost 0.7–1.0 dB at the midpoint from the built-in SfM's poses, and at
-    /// weight 10 it lost there too (BENCHMARKS.md, "Quality").
+    /// 3000 steps), but lost 1.0 / 1.5 dB at the midpoint from the built-in SfM's poses, and
+    /// at weight 10 it lost there too (BENCHMARKS.md, "Quality").
     pub off_centre_target: gems_math::PathCentre,
 }
 
