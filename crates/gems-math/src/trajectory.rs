@@ -270,16 +270,20 @@ pub fn off_centre_energy(
     }
     let mid = traj.eval(0.5).log();
     let logs: Vec<Vector6<f64>> = times.iter().map(|&u| traj.eval(u).log()).collect();
-    // The centre as weights on the logs: c = Σ_k w_k ξ_k.
-    let centre_weights = match centre {
-        PathCentre::Mean => vec![1.0 / times.len() as f64; times.len()],
-        PathCentre::Median => median_weights(&logs),
+    // The centre as weights on the logs, c = Σ_k w_k ξ_k (the mean summed first, then scaled).
+    let (c, centre_weights) = match centre {
+        PathCentre::Mean => {
+            let inv_n = 1.0 / times.len() as f64;
+            (
+                logs.iter().sum::<Vector6<f64>>() * inv_n,
+                vec![inv_n; times.len()],
+            )
+        }
+        PathCentre::Median => {
+            let w = median_weights(&logs);
+            (logs.iter().zip(&w).map(|(xi, &w)| xi * w).sum(), w)
+        }
     };
-    let c: Vector6<f64> = logs
-        .iter()
-        .zip(&centre_weights)
-        .map(|(xi, &w)| xi * w)
-        .sum();
     let r = mid - c;
     // d Log(Δ Exp(δ)) / dδ = J_r⁻¹(Log Δ), so dE/dδ = J_r⁻¹ᵀ ∂E/∂ξ with ∂E/∂ξ_mid = 2r and
     // ∂E/∂ξ_k = −2 w_k r.
@@ -319,13 +323,9 @@ fn median_weights(logs: &[Vector6<f64>]) -> Vec<f64> {
     let cov: Matrix6<f64> = centred.iter().map(|y| y * y.transpose()).sum();
     let eig = cov.symmetric_eigen();
     let axis = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
+    let along: Vec<f64> = centred.iter().map(|y| y.dot(&axis)).collect();
     let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&a, &b| {
-        centred[a]
-            .dot(&axis)
-            .total_cmp(&centred[b].dot(&axis))
-            .then(a.cmp(&b))
-    });
+    order.sort_by(|&a, &b| along[a].total_cmp(&along[b]).then(a.cmp(&b)));
     let mut w = vec![0.0; n];
     if n % 2 == 1 {
         w[order[n / 2]] = 1.0;
