@@ -12,7 +12,8 @@
 //!   camera centre, and [`Se3::to_f32_arrays`]/[`Se3::from_f32_arrays`] (row-major f32 rotation
 //!   + translation, the renderer's world-to-camera layout).
 //! - [`Trajectory`]: exposure trajectories Δ(u), u ∈ [0, 1] (Bézier, linear, cubic B-spline) with
-//!   knot Jacobians of the right perturbation; the virtual camera is c2w(u) = c2w_init·Δ(u).
+//!   knot Jacobians of the right perturbation; the virtual camera is c2w(u) = c2w_init·Δ(u);
+//!   the gauge energies and [`straighten_knots`] act on the knots.
 //! - [`posegrad`]: renderer gradients dL/dR, dL/dt of world-to-camera → Lie gradients.
 //!   Training chain for knot j of a view rendered at u:
 //!   `g = c2w_right_perturbation_gradient(&w2c_u, &dl_dr, &dl_dt)` then
@@ -45,7 +46,7 @@ pub use so3::{
 };
 pub use trajectory::{
     BEZIER_DEFAULT_KNOTS, Jacobian6, PathCentre, Trajectory, TrajectoryKind, bernstein,
-    off_centre_energy, uneven_speed_energy,
+    off_centre_energy, straighten_knots, uneven_speed_energy,
 };
 
 /// Errors of the maths layer (bad sizes or degenerate geometry; never a panic on user data).

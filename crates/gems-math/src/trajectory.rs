@@ -300,6 +300,33 @@ pub fn off_centre_energy(
     weight * r.norm_squared()
 }
 
+/// Replaces the knots by their least-squares straight line: knot j (of K) becomes m + s·(t_j − ½),
+/// t_j = j/(K−1), with m the knots' mean and s the least-squares slope, each of the six
+/// coordinates on its own. Knots already on such a line are left unchanged.
+///
+/// Knots evenly spaced on a line through the origin give a constant-speed screw motion for
+/// every kind: the Bézier factors Exp(b_j(u) ξ_j) then commute, and with Σ_j b_j(u) t_j = u the
+/// product is Exp(Σ_j b_j(u) ξ_j), linear in u. The blur model sees an exposure's poses only as
+/// a set, so a path may fold back on itself (a hook) and still fit the blurry image; a straight
+/// path cannot, which is why the trainer projects onto this line early in the schedule
+/// (`pose.straight_fraction`).
+pub fn straighten_knots(knots: &mut [[f64; 6]]) {
+    let k = knots.len();
+    if k < 3 {
+        // One or two points are their own least-squares line.
+        return;
+    }
+    let t: Vec<f64> = (0..k).map(|j| j as f64 / (k - 1) as f64 - 0.5).collect();
+    let tt: f64 = t.iter().map(|t| t * t).sum();
+    for i in 0..6 {
+        let mean = knots.iter().map(|x| x[i]).sum::<f64>() / k as f64;
+        let slope = knots.iter().zip(&t).map(|(x, t)| x[i] * t).sum::<f64>() / tt;
+        for (x, t) in knots.iter_mut().zip(&t) {
+            x[i] = mean + slope * t;
+        }
+    }
+}
+
 /// Weights that pick the median of `logs` along their principal axis: 1 on the middle pose, or
 /// ½ on each of the two middle poses of an even count.
 fn median_weights(logs: &[Vector6<f64>]) -> Vec<f64> {

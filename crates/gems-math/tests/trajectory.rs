@@ -373,3 +373,81 @@ fn the_median_is_the_middle_of_curved_and_uneven_paths() {
     assert!(median < 1e-24, "median {median}");
     assert!(mean > 1e-4, "mean {mean}");
 }
+
+#[test]
+fn straightened_knots_are_their_least_squares_line() {
+    for n in [3, 4, 9] {
+        let bent = knots(n, 0.3);
+        let mut line = bent.clone();
+        straighten_knots(&mut line);
+        let t: Vec<f64> = (0..n).map(|j| j as f64 / (n - 1) as f64 - 0.5).collect();
+        for i in 0..6 {
+            // The residuals are orthogonal to both regressors (1 and t): the normal equations.
+            let r: Vec<f64> = bent.iter().zip(&line).map(|(b, l)| b[i] - l[i]).collect();
+            assert!(r.iter().sum::<f64>().abs() < 1e-12, "n={n} coord {i}");
+            let rt: f64 = r.iter().zip(&t).map(|(r, t)| r * t).sum();
+            assert!(rt.abs() < 1e-12, "n={n} coord {i}");
+            // Evenly spaced on the line.
+            let step = line[1][i] - line[0][i];
+            for j in 1..n {
+                assert!((line[j][i] - line[j - 1][i] - step).abs() < 1e-12);
+            }
+        }
+        // Not trivially: the test knots are bent, and the line is a fixed point.
+        assert!(bent != line);
+        let mut again = line.clone();
+        straighten_knots(&mut again);
+        for (a, l) in again.iter().zip(&line) {
+            for i in 0..6 {
+                assert!((a[i] - l[i]).abs() < 1e-14);
+            }
+        }
+    }
+    // Two knots are already a line.
+    let mut two = knots(2, 0.3);
+    let before = two.clone();
+    straighten_knots(&mut two);
+    assert_eq!(two, before);
+}
+
+#[test]
+fn straight_knots_give_a_constant_speed_path() {
+    let screw = [0.11, -0.07, 0.05, 0.04, -0.09, 0.06];
+    let along = |d: [f64; 6], n: usize| -> Vec<[f64; 6]> {
+        (0..n)
+            .map(|j| d.map(|x| x * j as f64 / (n - 1) as f64))
+            .collect()
+    };
+    let scaled = |d: [f64; 6], s: f64| Se3::exp(&Vector6::from(d.map(|x| x * s)));
+    let u_grid = [0.0, 0.21, 0.5, 0.64, 1.0];
+    // Bézier: Exp(u·d) for any screw d.
+    let mut k = along(screw, 9);
+    straighten_knots(&mut k);
+    let bezier = Trajectory::new(TrajectoryKind::Bezier, k).unwrap();
+    for u in u_grid {
+        assert!(
+            close(&bezier.eval(u), &scaled(screw, u), 1e-12),
+            "bezier u={u}"
+        );
+    }
+    // Linear and the cubic B-spline interpolate translation and rotation apart, so they are a
+    // constant-speed line for a pure translation or a pure rotation; the spline's one segment
+    // spans the middle third of its knots (from d/3 to 2d/3).
+    for d in [
+        [0.11, -0.07, 0.05, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 0.04, -0.09, 0.06],
+    ] {
+        for (kind, start, span) in [
+            (TrajectoryKind::Linear, 0.0, 1.0),
+            (TrajectoryKind::CubicBSpline, 1.0 / 3.0, 1.0 / 3.0),
+        ] {
+            let mut k = along(d, kind.default_knots());
+            straighten_knots(&mut k);
+            let t = Trajectory::new(kind, k).unwrap();
+            for u in u_grid {
+                let want = scaled(d, start + span * u);
+                assert!(close(&t.eval(u), &want, 1e-12), "{kind:?} u={u}");
+            }
+        }
+    }
+}

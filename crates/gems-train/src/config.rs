@@ -100,6 +100,13 @@ pub struct PoseConfig {
     /// 3000 steps), but lost 1.0 / 1.5 dB at the midpoint from the built-in SfM's poses, and
     /// at weight 10 it lost there too (BENCHMARKS.md, "Quality").
     pub off_centre_target: gems_math::PathCentre,
+    /// For this fraction of the schedule, after every knot Adam step, each view's knots are
+    /// replaced by their least-squares straight line ([`gems_math::straighten_knots`]): the
+    /// path opens to the blur as a constant-speed line and only bends afterwards. Trained
+    /// freely from the start, most paths end hooked (they fold back on themselves, which the
+    /// blur model cannot tell from a straight path of the same poses) and the pose at u = ½
+    /// misses the mid-exposure one. 0 = off (the GeMS paper).
+    pub straight_fraction: f64,
 }
 
 impl Default for PoseConfig {
@@ -114,6 +121,7 @@ impl Default for PoseConfig {
             uneven_speed_weight: 0.0,
             off_centre_weight: 10.0,
             off_centre_target: gems_math::PathCentre::Mean,
+            straight_fraction: 0.0,
         }
     }
 }
@@ -322,6 +330,9 @@ impl TrainConfig {
         if !(self.pose.off_centre_weight.is_finite() && self.pose.off_centre_weight >= 0.0) {
             return Err("pose.off_centre_weight must be finite and >= 0".into());
         }
+        if !(0.0..=1.0).contains(&self.pose.straight_fraction) {
+            return Err("pose.straight_fraction must be in [0, 1]".into());
+        }
         if self.mcmc.cap_max == 0 {
             return Err("mcmc.cap_max must be >= 1".into());
         }
@@ -362,7 +373,7 @@ impl TrainConfig {
     }
 
     /// Converts a fraction of the run into a step count (at least 1 for periods).
-    fn steps_of(&self, fraction: f64) -> usize {
+    pub(crate) fn steps_of(&self, fraction: f64) -> usize {
         (fraction * self.steps as f64).round().max(0.0) as usize
     }
 
@@ -468,5 +479,8 @@ mod tests {
         std::fs::write(&p, "steps = 0").unwrap();
         let e = TrainConfig::from_toml_file(&p).unwrap_err().to_string();
         assert!(e.contains("bad.toml") && e.contains("steps"), "{e}");
+        std::fs::write(&p, "[pose]\nstraight_fraction = 1.5").unwrap();
+        let e = TrainConfig::from_toml_file(&p).unwrap_err().to_string();
+        assert!(e.contains("straight_fraction"), "{e}");
     }
 }

@@ -4,7 +4,8 @@
 //! Per step (gsplat ≥ 1.5 order): pick the next image of a per-epoch shuffled order, random
 //! background, render its n virtual cameras in one call, average, fused loss
 //! (1−λ)·L1 + λ·(1 − SSIM_valid) + MCMC regularisers, backward, Adam on every Gaussian group,
-//! knot gradients summed and applied every `accumulate_steps`, then MCMC relocation/growth on
+//! knot gradients summed and applied every `accumulate_steps` (and, for the first
+//! `straight_fraction` of the run, the knots projected onto straight lines), then MCMC relocation/growth on
 //! refinement steps and SGLD noise with the already decayed means lr.
 //!
 //! Everything that changes during training lives in [`TrainState`], which checkpoints save and
@@ -688,6 +689,20 @@ impl Trainer {
                 h,
             );
             self.state.knot_grad_acc.fill(0.0);
+            if step < c.steps_of(c.pose.straight_fraction) {
+                for view in self.state.knots.chunks_exact_mut(k * 6) {
+                    let mut line: Vec<[f64; 6]> = view
+                        .chunks_exact(6)
+                        .map(|x| std::array::from_fn(|i| f64::from(x[i])))
+                        .collect();
+                    gems_math::straighten_knots(&mut line);
+                    for (x, l) in view.chunks_exact_mut(6).zip(&line) {
+                        for (x, l) in x.iter_mut().zip(l) {
+                            *x = *l as f32;
+                        }
+                    }
+                }
+            }
         }
     }
 

@@ -65,6 +65,25 @@ fn same_seed_same_result_and_resume_is_bit_identical() {
     median.pose.off_centre_target = gems_math::PathCentre::Median;
     let d = check_same_seed_and_resume(&median);
     assert_ne!(a.knots, d.knots);
+    // Straightened for the whole run: the same guarantees, other trajectories, and every
+    // view's knots end on their least-squares line.
+    let mut straight = small_config();
+    straight.pose.straight_fraction = 1.0;
+    let e = check_same_seed_and_resume(&straight);
+    assert_ne!(a.knots, e.knots);
+    for view in e.knots.chunks_exact(straight.num_knots() * 6) {
+        let knots: Vec<[f64; 6]> = view
+            .chunks_exact(6)
+            .map(|x| std::array::from_fn(|i| f64::from(x[i])))
+            .collect();
+        let mut line = knots.clone();
+        gems_math::straighten_knots(&mut line);
+        for (k, l) in knots.iter().zip(&line) {
+            for i in 0..6 {
+                assert!((k[i] - l[i]).abs() < 1e-6, "knot off its line: {k:?} vs {l:?}");
+            }
+        }
+    }
     // From wide random paths, the energy's weight brings u = ½ nearer the mean pose.
     let mut wide = small_config();
     wide.pose.knot_init_std = 0.05;
