@@ -80,7 +80,10 @@ fn same_seed_same_result_and_resume_is_bit_identical() {
         gems_math::straighten_knots(&mut line);
         for (k, l) in knots.iter().zip(&line) {
             for i in 0..6 {
-                assert!((k[i] - l[i]).abs() < 1e-6, "knot off its line: {k:?} vs {l:?}");
+                assert!(
+                    (k[i] - l[i]).abs() < 1e-6,
+                    "knot off its line: {k:?} vs {l:?}"
+                );
             }
         }
     }
