@@ -304,9 +304,10 @@ pub fn off_centre_energy(
 /// t_j = j/(K−1), with m the knots' mean and s the least-squares slope, each of the six
 /// coordinates on its own. Knots already on such a line are left unchanged.
 ///
-/// Knots evenly spaced on a line through the origin give a constant-speed screw motion for
-/// every kind: the Bézier factors Exp(b_j(u) ξ_j) then commute, and with Σ_j b_j(u) t_j = u the
-/// product is Exp(Σ_j b_j(u) ξ_j), linear in u. The blur model sees an exposure's poses only as
+/// Bézier knots evenly spaced on a line through the origin give a constant-speed screw motion:
+/// the factors Exp(b_j(u) ξ_j) then commute, and with Σ_j b_j(u) t_j = u the product is
+/// Exp(Σ_j b_j(u) ξ_j), linear in u. Linear and B-spline trajectories interpolate translation
+/// and rotation apart, so for them this holds for a pure translation or rotation. The blur model sees an exposure's poses only as
 /// a set, so a path may fold back on itself (a hook) and still fit the blurry image; a straight
 /// path cannot, which is why the trainer projects onto this line early in the schedule
 /// (`pose.straight_fraction`).
