@@ -690,12 +690,10 @@ impl Trainer {
             );
             self.state.knot_grad_acc.fill(0.0);
             if step < c.steps_of(c.pose.straight_fraction) {
-                for view in self.state.knots.chunks_exact_mut(k * 6) {
-                    let mut line: Vec<[f64; 6]> = view
-                        .chunks_exact(6)
-                        .map(|x| std::array::from_fn(|i| f64::from(x[i])))
-                        .collect();
+                for v in 0..self.views.len() {
+                    let mut line = trajectory_of(c, &self.state.knots, v).knots().to_vec();
                     gems_math::straighten_knots(&mut line);
+                    let view = &mut self.state.knots[v * k * 6..(v + 1) * k * 6];
                     for (x, l) in view.chunks_exact_mut(6).zip(&line) {
                         for (x, l) in x.iter_mut().zip(l) {
                             *x = *l as f32;
