@@ -434,12 +434,15 @@ impl ResidentStep {
         Ok(self.losses.len() - 1)
     }
 
-    /// The resident image of `view`, uploaded now if this is its first step.
+    /// The resident image of `view`, uploaded now if this is its first step at this size.
     fn target(&mut self, view: usize, image: &[f32]) -> Result<wgpu::Buffer, GpuError> {
         if self.targets.len() <= view {
             self.targets.resize(view + 1, None);
         }
-        if let Some(b) = &self.targets[view] {
+        // A view's image is uploaded again when its size changes (coarse-to-fine training).
+        if let Some(b) = &self.targets[view]
+            && b.size() == size_of_val(image) as u64
+        {
             return Ok(b.clone());
         }
         let b = buffers::upload(&self.ctx, "training image", image)?;

@@ -238,6 +238,35 @@ impl Default for NormalizeConfig {
     }
 }
 
+/// Coarse-to-fine training: for the first `fraction` of the schedule the blurry image and the
+/// renders are compared at `levels` octaves below full resolution, then one octave finer in equal
+/// parts of that fraction, then at full resolution. The renders are made at the coarse size
+/// (intrinsics scaled, [`Intrinsics::resized`](gems_math::Intrinsics::resized)) and the target is
+/// the area-averaged image, so the loss sees the low frequencies only: a pose that is several
+/// pixels off still lands inside the photometric basin there (the coarse-to-fine argument of
+/// BARF, Lin et al. 2021, for joint pose and radiance-field optimisation). Off by default
+/// (`levels = 0`, the GeMS paper).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CoarseToFineConfig {
+    /// Octaves below full resolution at the start (0 = off; 2 = a quarter of the width).
+    pub levels: u32,
+    /// Fraction of the schedule trained below full resolution.
+    pub fraction: f64,
+}
+
+impl Default for CoarseToFineConfig {
+    fn default() -> Self {
+        Self {
+            levels: 0,
+            fraction: 0.3,
+        }
+    }
+}
+
+/// Largest `coarse_to_fine.levels`: a sixteenth of the width.
+pub const MAX_COARSE_LEVELS: u32 = 4;
+
 /// Everything that defines a training run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -264,6 +293,7 @@ pub struct TrainConfig {
     pub mcmc: McmcConfig,
     pub init: InitConfig,
     pub normalize: NormalizeConfig,
+    pub coarse_to_fine: CoarseToFineConfig,
     /// Checkpoint period in steps (0 = only at the end).
     pub checkpoint_every: usize,
     /// Progress log period in steps.
@@ -290,6 +320,7 @@ impl Default for TrainConfig {
             mcmc: McmcConfig::default(),
             init: InitConfig::default(),
             normalize: NormalizeConfig::default(),
+            coarse_to_fine: CoarseToFineConfig::default(),
             checkpoint_every: 1000,
             log_every: 100,
         }
@@ -340,6 +371,14 @@ impl TrainConfig {
         if !(0.0..=1.0).contains(&self.pose.straight_fraction) {
             return Err("pose.straight_fraction must be in [0, 1]".into());
         }
+        if self.coarse_to_fine.levels > MAX_COARSE_LEVELS {
+            return Err(format!(
+                "coarse_to_fine.levels must be <= {MAX_COARSE_LEVELS}"
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.coarse_to_fine.fraction) {
+            return Err("coarse_to_fine.fraction must be in [0, 1]".into());
+        }
         if self.mcmc.cap_max == 0 {
             return Err("mcmc.cap_max must be >= 1".into());
         }
@@ -382,6 +421,18 @@ impl TrainConfig {
     /// Converts a fraction of the run into a step count (at least 1 for periods).
     pub(crate) fn steps_of(&self, fraction: f64) -> usize {
         (fraction * self.steps as f64).round().max(0.0) as usize
+    }
+
+    /// Octaves below full resolution at which `step` trains (0 = full resolution): the first
+    /// `coarse_to_fine.fraction` of the run in `levels` equal parts, coarsest first.
+    pub fn resolution_level(&self, step: usize) -> u32 {
+        let c = &self.coarse_to_fine;
+        let end = self.steps_of(c.fraction);
+        if c.levels == 0 || step >= end {
+            return 0;
+        }
+        let part = (step * c.levels as usize / end) as u32;
+        c.levels - part
     }
 
     /// Means lr at `step` (exponential decay to `means_final_factor` at the last step).
@@ -489,5 +540,31 @@ mod tests {
         std::fs::write(&p, "[pose]\nstraight_fraction = 1.5").unwrap();
         let e = TrainConfig::from_toml_file(&p).unwrap_err().to_string();
         assert!(e.contains("straight_fraction"), "{e}");
+        std::fs::write(&p, "[coarse_to_fine]\nlevels = 5").unwrap();
+        let e = TrainConfig::from_toml_file(&p).unwrap_err().to_string();
+        assert!(e.contains("coarse_to_fine.levels"), "{e}");
+    }
+
+    #[test]
+    fn coarse_to_fine_runs_the_levels_coarsest_first_in_equal_parts() {
+        let mut c = TrainConfig {
+            steps: 1000,
+            ..TrainConfig::default()
+        };
+        assert!((0..1000).all(|s| c.resolution_level(s) == 0));
+        c.coarse_to_fine = CoarseToFineConfig {
+            levels: 2,
+            fraction: 0.3,
+        };
+        let levels: Vec<u32> = (0..1000).map(|s| c.resolution_level(s)).collect();
+        assert_eq!(levels.iter().filter(|&&l| l == 2).count(), 150);
+        assert_eq!(levels.iter().filter(|&&l| l == 1).count(), 150);
+        assert_eq!(
+            (levels[0], levels[149], levels[150], levels[299]),
+            (2, 2, 1, 1)
+        );
+        assert!(levels[300..].iter().all(|&l| l == 0));
+        c.coarse_to_fine.fraction = 0.0;
+        assert_eq!(c.resolution_level(0), 0);
     }
 }

@@ -48,8 +48,8 @@ pub use checkpoint::{
     CHECKPOINT_JSON, CHECKPOINT_TENSORS, has_checkpoint, load_checkpoint, save_checkpoint,
 };
 pub use config::{
-    InitConfig, LearningRates, McmcConfig, NormalizeConfig, PoseConfig, REFERENCE_STEPS, TopUp,
-    TrainConfig,
+    CoarseToFineConfig, InitConfig, LearningRates, MAX_COARSE_LEVELS, McmcConfig, NormalizeConfig,
+    PoseConfig, REFERENCE_STEPS, TopUp, TrainConfig,
 };
 pub use init::{PointCloud, from_points, random_in_frustums};
 pub use normalize::Normalization;

@@ -2,7 +2,8 @@
 //! with gradient accumulation), one blurry image per step through the blur model.
 //!
 //! Per step (gsplat ≥ 1.5 order): pick the next image of a per-epoch shuffled order, random
-//! background, render its n virtual cameras in one call, average, fused loss
+//! background, render its n virtual cameras in one call (for the first `coarse_to_fine`
+//! fraction of the run at a coarser size, against the area-averaged image), average, fused loss
 //! (1−λ)·L1 + λ·(1 − SSIM_valid) + MCMC regularisers, backward, Adam on every Gaussian group,
 //! knot gradients summed and applied every `accumulate_steps` (and, for the first
 //! `straight_fraction` of the run, the knots projected onto straight lines), then MCMC relocation/growth on
@@ -157,6 +158,66 @@ pub struct Trainer {
     knot_grads: Vec<[f64; 6]>,
     binoms: BinomialTable,
     times: Vec<f64>,
+    /// `coarse[l − 1][v]`: view `v` area-averaged `l` octaves down with its intrinsics, for
+    /// the coarse-to-fine levels (derived from `views`, not part of the checkpoint).
+    coarse: Vec<Vec<(Intrinsics, Vec<f32>)>>,
+}
+
+/// Each view's image and intrinsics one to `levels` octaves below full resolution.
+fn coarse_levels(views: &[TrainView], levels: u32) -> Vec<Vec<(Intrinsics, Vec<f32>)>> {
+    (1..=levels)
+        .map(|l| {
+            views
+                .iter()
+                .map(|v| {
+                    let k = v.intrinsics;
+                    let (w, h) = gems_data::image::downscaled_size(k.width, k.height, 1 << l);
+                    let full = gems_data::ImageRgb {
+                        width: k.width,
+                        height: k.height,
+                        data: v.image.clone(),
+                    };
+                    let small = gems_data::image::downscale_area(&full, w, h);
+                    (k.resized(w, h), small.data)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// One clear error when the coarsest level leaves a view smaller than the loss can take.
+fn check_coarse_sizes(cfg: &TrainConfig, views: &[TrainView]) -> Result<(), TrainError> {
+    let levels = cfg.coarse_to_fine.levels;
+    if levels == 0 {
+        return Ok(());
+    }
+    for v in views {
+        let k = &v.intrinsics;
+        let (w, h) = gems_data::image::downscaled_size(k.width, k.height, 1 << levels);
+        TrainingLoss::new(h as usize, w as usize, cfg.ssim_lambda).map_err(|e| {
+            TrainError::Config(format!(
+                "coarse_to_fine.levels = {levels} trains view {} ({}x{}) at {w}x{h}: {e}; use fewer levels",
+                v.name, k.width, k.height
+            ))
+        })?;
+    }
+    Ok(())
+}
+
+/// The intrinsics and target image of view `v` at `level` octaves below full resolution.
+fn view_at_level<'a>(
+    views: &'a [TrainView],
+    coarse: &'a [Vec<(Intrinsics, Vec<f32>)>],
+    v: usize,
+    level: u32,
+) -> (Intrinsics, &'a [f32]) {
+    match level {
+        0 => (views[v].intrinsics, &views[v].image),
+        l => {
+            let (k, image) = &coarse[l as usize - 1][v];
+            (*k, image)
+        }
+    }
 }
 
 impl Trainer {
@@ -193,6 +254,7 @@ impl Trainer {
                 )));
             }
         }
+        check_coarse_sizes(&cfg, &input.views)?;
         input.gaussians.validate()?;
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         let nk = cfg.num_knots() * 6 * input.views.len();
@@ -247,6 +309,7 @@ impl Trainer {
                 state.gaussians.len()
             )));
         }
+        check_coarse_sizes(&cfg, &views)?;
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         rng.set_word_pos(state.rng_word_pos);
         let mut t = Self::assemble(cfg, views, normalization, scene_scale, init_label, state);
@@ -264,7 +327,9 @@ impl Trainer {
     ) -> Self {
         let times = cfg.virtual_times();
         let k = cfg.num_knots();
+        let coarse = coarse_levels(&views, cfg.coarse_to_fine.levels);
         Self {
+            coarse,
             rng: ChaCha8Rng::seed_from_u64(cfg.seed),
             times,
             knot_grads: vec![[0.0; 6]; k],
@@ -518,8 +583,11 @@ impl Trainer {
         traj: &Trajectory,
         step: usize,
     ) -> Result<(f32, f32), TrainError> {
+        let level = self.cfg.resolution_level(step);
+        let (k, _) = view_at_level(&self.views, &self.coarse, v, level);
+        let li = self.loss_for(k.width, k.height)?;
+        let (_, image) = view_at_level(&self.views, &self.coarse, v, level);
         let view = &self.views[v];
-        let k = view.intrinsics;
         let exposure = Exposure {
             c2w_init: &view.c2w_init,
             trajectory: traj,
@@ -533,15 +601,12 @@ impl Trainer {
             bg,
             &mut self.ws,
         )?;
-        let li = self.loss_for(k.width, k.height)?;
-        let view = &self.views[v];
-        self.d_blurred.resize(view.image.len(), 0.0);
+        self.d_blurred.resize(image.len(), 0.0);
         let lv = self.losses[li]
             .1
-            .compute(&self.ws.blurred, &view.image, &mut self.d_blurred)
+            .compute(&self.ws.blurred, image, &mut self.d_blurred)
             .map_err(|e| TrainError::Input(format!("view {}: {e}", view.name)))?;
-        let train_psnr = gems_metrics::psnr_capped(&self.ws.blurred, &view.image);
-        let view = &self.views[v];
+        let train_psnr = gems_metrics::psnr_capped(&self.ws.blurred, image);
         let exposure = Exposure {
             c2w_init: &view.c2w_init,
             trajectory: traj,
@@ -577,12 +642,18 @@ impl Trainer {
             ));
         };
         let view = &self.views[v];
+        let (k, image) = view_at_level(
+            &self.views,
+            &self.coarse,
+            v,
+            self.cfg.resolution_level(step),
+        );
         virtual_cameras(
             &Exposure {
                 c2w_init: &view.c2w_init,
                 trajectory: traj,
                 times: &self.times,
-                intrinsics: &view.intrinsics,
+                intrinsics: &k,
             },
             &mut self.ws.cams,
         );
@@ -603,7 +674,7 @@ impl Trainer {
         res.step.set_sh_degree(sh_degree);
         let out = res
             .step
-            .step(r, v, &view.image, &self.ws.cams, bg, &settings)
+            .step(r, v, image, &self.ws.cams, bg, &settings)
             .map_err(|e| match e {
                 gems_gpu::GpuError::Shape(why) => {
                     TrainError::Input(format!("view {}: {why}", view.name))
