@@ -17,7 +17,7 @@ mod ssim;
 
 pub use lpips::{Lpips, LpipsError};
 pub use psnr::{psnr, psnr_capped};
-pub use ssim::{LossValue, TrainingLoss, ssim, ssim_valid, ssim_valid_with_grad};
+pub use ssim::{LossValue, SSIM_WINDOW, TrainingLoss, ssim, ssim_valid, ssim_valid_with_grad};
 
 /// Errors of the image metrics.
 #[derive(Debug, thiserror::Error)]

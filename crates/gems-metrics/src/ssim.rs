@@ -17,7 +17,9 @@ use rayon::prelude::*;
 
 use crate::{MetricsError, check_pair};
 
-const WIN: usize = 11;
+/// Side of the SSIM window in pixels: images smaller than this in either axis have no SSIM.
+pub const SSIM_WINDOW: usize = 11;
+const WIN: usize = SSIM_WINDOW;
 const RAD: usize = WIN / 2;
 const C1: f64 = 0.01 * 0.01;
 const C2: f64 = 0.03 * 0.03;

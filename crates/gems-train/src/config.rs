@@ -249,7 +249,9 @@ impl Default for NormalizeConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CoarseToFineConfig {
-    /// Octaves below full resolution at the start (0 = off; 2 = a quarter of the width).
+    /// Octaves below full resolution at the start (0 = off; 2 = a quarter of the width). At
+    /// most: images too small for a level (under the 11-pixel SSIM window) train their coarse
+    /// part at the coarsest level that fits.
     pub levels: u32,
     /// Fraction of the schedule trained below full resolution.
     pub fraction: f64,

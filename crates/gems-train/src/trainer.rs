@@ -159,7 +159,8 @@ pub struct Trainer {
     binoms: BinomialTable,
     times: Vec<f64>,
     /// `coarse[l − 1][v]`: view `v` area-averaged `l` octaves down with its intrinsics, for
-    /// the coarse-to-fine levels (derived from `views`, not part of the checkpoint).
+    /// the coarse-to-fine levels that fit the images (derived from `views`, not part of the
+    /// checkpoint).
     coarse: Vec<Vec<(Intrinsics, Vec<f32>)>>,
 }
 
@@ -185,23 +186,18 @@ fn coarse_levels(views: &[TrainView], levels: u32) -> Vec<Vec<(Intrinsics, Vec<f
         .collect()
 }
 
-/// One clear error when the coarsest level leaves a view smaller than the loss can take.
-fn check_coarse_sizes(cfg: &TrainConfig, views: &[TrainView]) -> Result<(), TrainError> {
-    let levels = cfg.coarse_to_fine.levels;
-    if levels == 0 {
-        return Ok(());
-    }
-    for v in views {
-        let k = &v.intrinsics;
-        let (w, h) = gems_data::image::downscaled_size(k.width, k.height, 1 << levels);
-        TrainingLoss::new(h as usize, w as usize, cfg.ssim_lambda).map_err(|e| {
-            TrainError::Config(format!(
-                "coarse_to_fine.levels = {levels} trains view {} ({}x{}) at {w}x{h}: {e}; use fewer levels",
-                v.name, k.width, k.height
-            ))
-        })?;
-    }
-    Ok(())
+/// How many of the configured coarse levels every view can take: the coarsest must leave each
+/// image at least the SSIM window on either side (so the default also trains tiny images).
+fn fitting_levels(levels: u32, views: &[TrainView]) -> u32 {
+    (1..=levels)
+        .take_while(|&l| {
+            views.iter().all(|v| {
+                let k = &v.intrinsics;
+                let (w, h) = gems_data::image::downscaled_size(k.width, k.height, 1 << l);
+                w as usize >= gems_metrics::SSIM_WINDOW && h as usize >= gems_metrics::SSIM_WINDOW
+            })
+        })
+        .count() as u32
 }
 
 /// The intrinsics and target image of view `v` at `level` octaves below full resolution.
@@ -254,7 +250,6 @@ impl Trainer {
                 )));
             }
         }
-        check_coarse_sizes(&cfg, &input.views)?;
         input.gaussians.validate()?;
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         let nk = cfg.num_knots() * 6 * input.views.len();
@@ -309,7 +304,6 @@ impl Trainer {
                 state.gaussians.len()
             )));
         }
-        check_coarse_sizes(&cfg, &views)?;
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         rng.set_word_pos(state.rng_word_pos);
         let mut t = Self::assemble(cfg, views, normalization, scene_scale, init_label, state);
@@ -327,7 +321,15 @@ impl Trainer {
     ) -> Self {
         let times = cfg.virtual_times();
         let k = cfg.num_knots();
-        let coarse = coarse_levels(&views, cfg.coarse_to_fine.levels);
+        let levels = fitting_levels(cfg.coarse_to_fine.levels, &views);
+        if levels < cfg.coarse_to_fine.levels {
+            tracing::info!(
+                requested = cfg.coarse_to_fine.levels,
+                used = levels,
+                "coarse-to-fine: fewer levels fit these images"
+            );
+        }
+        let coarse = coarse_levels(&views, levels);
         Self {
             coarse,
             rng: ChaCha8Rng::seed_from_u64(cfg.seed),
@@ -477,6 +479,14 @@ impl Trainer {
         v
     }
 
+    /// Octaves below full size at which `step` trains: the configured schedule, its coarser
+    /// levels clamped to the coarsest that fits the images.
+    fn resolution_level(&self, step: usize) -> u32 {
+        self.cfg
+            .resolution_level(step)
+            .min(self.coarse.len() as u32)
+    }
+
     fn loss_for(&mut self, w: u32, h: u32) -> Result<usize, TrainError> {
         if let Some(i) = self.losses.iter().position(|(s, _)| *s == (w, h)) {
             return Ok(i);
@@ -583,7 +593,7 @@ impl Trainer {
         traj: &Trajectory,
         step: usize,
     ) -> Result<(f32, f32), TrainError> {
-        let level = self.cfg.resolution_level(step);
+        let level = self.resolution_level(step);
         let (k, _) = view_at_level(&self.views, &self.coarse, v, level);
         let li = self.loss_for(k.width, k.height)?;
         let (_, image) = view_at_level(&self.views, &self.coarse, v, level);
@@ -636,18 +646,14 @@ impl Trainer {
         step: usize,
         sh_degree: u32,
     ) -> Result<(f32, f32), TrainError> {
+        let level = self.resolution_level(step);
         let (Engine::Gpu(r), Some(res)) = (&mut self.renderer, &mut self.resident) else {
             return Err(TrainError::Input(
                 "the resident step needs the GPU engine".into(),
             ));
         };
         let view = &self.views[v];
-        let (k, image) = view_at_level(
-            &self.views,
-            &self.coarse,
-            v,
-            self.cfg.resolution_level(step),
-        );
+        let (k, image) = view_at_level(&self.views, &self.coarse, v, level);
         virtual_cameras(
             &Exposure {
                 c2w_init: &view.c2w_init,

@@ -96,24 +96,12 @@ fn same_seed_same_result_and_resume_is_bit_identical() {
     let f = check_same_seed_and_resume(&coarse);
     assert_ne!(a.knots, f.knots);
     assert_ne!(a.gaussians, f.gaussians);
-    // Two octaves down, the 32×24 views are 8×6, below the SSIM window: one clear error.
+    // Two octaves down the 32×24 views would be 8×6, below the SSIM window: the coarse part
+    // runs at the one level that fits, the same run as `levels = 1`.
     coarse.coarse_to_fine.levels = 2;
-    let scene = common::blur_scene(3, 32, 24, 0.2, 0.02, 1);
-    let input = TrainInput {
-        views: scene.views.clone(),
-        gaussians: common::init_gaussians(&scene, 0.02, 3),
-        normalization: Normalization::identity(),
-        scene_scale: 1.0,
-        init_label: "gt-noisy".into(),
-    };
-    let e = Trainer::new(coarse, input)
-        .err()
-        .expect("too small")
-        .to_string();
-    assert!(
-        e.contains("coarse_to_fine.levels = 2") && e.contains("8x6"),
-        "{e}"
-    );
+    let mut clamped = trainer(&coarse);
+    clamped.run(|_, _| Ok(())).unwrap();
+    same(clamped.state().unwrap(), &f);
     // From wide random paths, the energy's weight brings u = ½ nearer the mean pose.
     let mut wide = small_config();
     wide.pose.knot_init_std = 0.05;
