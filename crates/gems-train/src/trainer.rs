@@ -166,24 +166,25 @@ pub struct Trainer {
 
 /// Each view's image and intrinsics one to `levels` octaves below full resolution.
 fn coarse_levels(views: &[TrainView], levels: u32) -> Vec<Vec<(Intrinsics, Vec<f32>)>> {
-    (1..=levels)
-        .map(|l| {
-            views
-                .iter()
-                .map(|v| {
-                    let k = v.intrinsics;
-                    let (w, h) = gems_data::image::downscaled_size(k.width, k.height, 1 << l);
-                    let full = gems_data::ImageRgb {
-                        width: k.width,
-                        height: k.height,
-                        data: v.image.clone(),
-                    };
-                    let small = gems_data::image::downscale_area(&full, w, h);
-                    (k.resized(w, h), small.data)
-                })
-                .collect()
-        })
-        .collect()
+    let mut coarse = vec![Vec::with_capacity(views.len()); levels as usize];
+    if levels == 0 {
+        return coarse;
+    }
+    for v in views {
+        let k = v.intrinsics;
+        // One copy of the view as an image for all its levels.
+        let full = gems_data::ImageRgb {
+            width: k.width,
+            height: k.height,
+            data: v.image.clone(),
+        };
+        for (l, level) in (1..).zip(coarse.iter_mut()) {
+            let (w, h) = gems_data::image::downscaled_size(k.width, k.height, 1 << l);
+            let small = gems_data::image::downscale_area(&full, w, h);
+            level.push((k.resized(w, h), small.data));
+        }
+    }
+    coarse
 }
 
 /// How many of the configured coarse levels every view can take: the coarsest must leave each
