@@ -847,6 +847,15 @@ fn bench_quality_writes_the_four_rows() {
     // Each row also gives the APE of the poses it started from: zero from the ground truth.
     let ape_init = |r: usize| runs[r]["ape_init_rmse"].as_f64().unwrap();
     assert!(ape_init(2) < 1e-9 && ape_init(1) > 0.0, "{}", runs[1]);
+    // And the relative rotation error over every pair of views: zero from the ground truth,
+    // positive from the SfM.
+    let rot_init = |r: usize| runs[r]["rotation_error_init_deg"].as_f64().unwrap();
+    assert!(rot_init(2) < 1e-6 && rot_init(1) > 0.0, "{}", runs[1]);
+    assert!(
+        runs[2]["rotation_error_deg"].as_f64().unwrap() < 1.0,
+        "{}",
+        runs[2]
+    );
     assert!(rows[2].contains(" → "), "{}", rows[2]);
     let sharp = out.join("seed3/sharp");
     let scene = out.join("seed3/scene");

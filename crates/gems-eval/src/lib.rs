@@ -13,7 +13,10 @@
 //!   with refinement), `nvs_no_pose_opt` (held-out views at their initial pose) and APE
 //!   ([`ape_of_centres`]: Sim(3) Umeyama of midpoint camera centres to the ground truth, evo's
 //!   statistics, in the input frame's units; `ape_init` the same for the initial poses, so the
-//!   pair shows what training did to the cameras). The result serialises to `metrics.json`
+//!   pair shows what training did to the cameras), and the relative rotation error over every
+//!   pair of views (`rotation_error`, `rotation_error_init`; [`relative_rotation_error`],
+//!   degrees, no alignment needed), which sees the cameras' orientation that APE's centres do
+//!   not. The result serialises to `metrics.json`
 //!   ([`MetricsReport`], [`write_metrics_json`]).
 //! - [`tum`]: TUM trajectory files; [`write_trajectories`] writes every view's n virtual poses
 //!   plus the midpoints (and ground truth when known), in the input frame.
@@ -43,8 +46,9 @@ pub mod viewer;
 use std::path::{Path, PathBuf};
 
 pub use metrics::{
-    ApeSummary, EvalView, ImageScore, MetricsReport, PoseMode, SplitResult, SplitScores,
-    ape_of_centres, evaluate_views, evaluate_views_with_progress, score_image,
+    ApeSummary, EvalView, ImageScore, MetricsReport, PoseMode, RotationErrorSummary, SplitResult,
+    SplitScores, ape_of_centres, evaluate_views, evaluate_views_with_progress,
+    relative_rotation_error, score_image,
 };
 pub use protocol::{
     EvalData, Evaluation, HeldOutView, attach_edi_images, eval_data_from_scene, evaluate_output,

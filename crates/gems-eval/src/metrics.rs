@@ -1,7 +1,7 @@
 //! Per-image metrics, split summaries, APE and the metrics.json document.
 
 use gems_gpu::Engine;
-use gems_math::{Alignment, Intrinsics, Se3, ape_translation};
+use gems_math::{Alignment, Intrinsics, Matrix3, Se3, So3, ape_translation, error_stats};
 use gems_metrics::Lpips;
 use gems_splat::{Camera, Gaussians, RenderSettings};
 use serde::{Deserialize, Serialize};
@@ -73,6 +73,20 @@ pub struct ApeSummary {
     pub max: f64,
 }
 
+/// Relative rotation error over every pair of views, in degrees: for views i and j the angle of
+/// (R̂ᵢᵀ R̂ⱼ)ᵀ (Rᵢᵀ Rⱼ), the estimated camera-to-camera rotation against the ground truth's. It
+/// needs no alignment (a global rotation of either set cancels) and sees what APE, which aligns
+/// camera centres only, cannot: cameras in the right places looking the wrong way. This is the
+/// pairwise rotation error of SfM evaluations (e.g. the Image Matching Challenge's mAA over
+/// relative poses); all pairs rather than consecutive ones, because views need not be ordered.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RotationErrorSummary {
+    pub rmse_deg: f64,
+    pub mean_deg: f64,
+    pub median_deg: f64,
+    pub max_deg: f64,
+}
+
 /// The `metrics.json` document.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MetricsReport {
@@ -96,6 +110,12 @@ pub struct MetricsReport {
     /// `ape` reads as how far training moved the cameras toward the truth.
     #[serde(default)]
     pub ape_init: Option<ApeSummary>,
+    /// Relative rotation error of the training views' trajectory midpoints.
+    #[serde(default)]
+    pub rotation_error: Option<RotationErrorSummary>,
+    /// The same for the initial poses.
+    #[serde(default)]
+    pub rotation_error_init: Option<RotationErrorSummary>,
     pub steps: usize,
     pub seconds: f64,
     pub gaussians: usize,
@@ -212,6 +232,38 @@ pub fn evaluate_views_with_progress(
         scores: SplitScores::from_images(per_image),
         renders,
         poses,
+    })
+}
+
+/// [`RotationErrorSummary`] of estimated against ground-truth camera-to-world rotations (same
+/// order); at least two views.
+pub fn relative_rotation_error(
+    est: &[Matrix3<f64>],
+    gt: &[Matrix3<f64>],
+) -> Result<RotationErrorSummary, EvalError> {
+    if est.len() != gt.len() || est.len() < 2 {
+        return Err(EvalError::Input(format!(
+            "relative rotation error needs two or more views with ground truth, got {} estimated \
+             and {} ground-truth rotations",
+            est.len(),
+            gt.len()
+        )));
+    }
+    let mut angles = Vec::with_capacity(est.len() * (est.len() - 1) / 2);
+    for i in 0..est.len() {
+        for j in i + 1..est.len() {
+            let rel_est = est[i].transpose() * est[j];
+            let rel_gt = gt[i].transpose() * gt[j];
+            let diff = So3::from_matrix_orthonormalized(&(rel_est.transpose() * rel_gt));
+            angles.push(diff.log().norm().to_degrees());
+        }
+    }
+    let s = error_stats(&angles)?;
+    Ok(RotationErrorSummary {
+        rmse_deg: s.rmse,
+        mean_deg: s.mean,
+        median_deg: s.median,
+        max_deg: s.max,
     })
 }
 

@@ -12,8 +12,8 @@ use gems_train::TrainOutput;
 
 use crate::EvalError;
 use crate::metrics::{
-    ApeSummary, EvalView, MetricsReport, PoseMode, SplitResult, SplitScores, ape_of_centres,
-    evaluate_views_with_progress, score_image,
+    ApeSummary, EvalView, MetricsReport, PoseMode, RotationErrorSummary, SplitResult, SplitScores,
+    ape_of_centres, evaluate_views_with_progress, relative_rotation_error, score_image,
 };
 use crate::refine::PoseRefineConfig;
 use crate::report::{GridRow, ReportInput};
@@ -127,8 +127,10 @@ pub fn evaluate_output_on(
     let nvs_no_pose_opt = run(&held, PoseMode::AsGiven)?;
     let nvs = run(&held, PoseMode::Refine(*refine))?;
     let deblur_refined = run(&train_views, PoseMode::Refine(*refine))?;
-    let ape = ape_if_known(centres_and_gt(output, |v| &v.mid_c2w));
-    let ape_init = ape_if_known(centres_and_gt(output, |v| &v.c2w_init));
+    let mid_pairs = poses_with_gt(output, |v| &v.mid_c2w);
+    let init_pairs = poses_with_gt(output, |v| &v.c2w_init);
+    let ape = ape_if_known(&mid_pairs);
+    let ape_init = ape_if_known(&init_pairs);
     let input = input_scores(output, data, &deblur_views, lpips)?;
     let metrics = MetricsReport {
         deblur: deblur.scores.clone(),
@@ -138,6 +140,8 @@ pub fn evaluate_output_on(
         nvs_no_pose_opt: nvs_no_pose_opt.scores.clone(),
         ape,
         ape_init,
+        rotation_error: rotation_error_if_known(&mid_pairs),
+        rotation_error_init: rotation_error_if_known(&init_pairs),
         steps: output.steps,
         seconds: output.seconds,
         gaussians: gaussians.len(),
@@ -177,33 +181,49 @@ fn input_scores(
     Ok(SplitScores::from_images(per_image))
 }
 
-/// The camera centres of `pose(view)` (the trajectory midpoint, or the initial pose) and of the
-/// ground truth, in the input frame, for the training views whose ground-truth pose is known.
-fn centres_and_gt(
+/// The camera-to-world poses `pose(view)` (the trajectory midpoint, or the initial pose) and the
+/// ground truth's, in the input frame, for the training views whose ground-truth pose is known.
+fn poses_with_gt(
     output: &TrainOutput,
     pose: impl Fn(&gems_train::ViewResult) -> &gems_math::Pose,
-) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
-    let norm = &output.normalization;
+) -> Vec<(Se3, Se3)> {
     output
         .views
         .iter()
         .filter_map(|v| {
             let gt = v.c2w_gt.as_ref()?;
-            let est: [f64; 3] = norm.invert_point(&se3(pose(v)).trans).into();
-            let gt: [f64; 3] = norm.invert_point(&se3(gt).trans).into();
-            Some((est, gt))
+            Some((
+                to_input_frame(output, &se3(pose(v))),
+                to_input_frame(output, &se3(gt)),
+            ))
         })
-        .unzip()
+        .collect()
 }
 
-/// APE of `(estimated, ground-truth)` centres; `None` (with a warning when the alignment fails)
-/// for fewer than 3 views with ground truth.
-fn ape_if_known((est, gt): (Vec<[f64; 3]>, Vec<[f64; 3]>)) -> Option<ApeSummary> {
-    if est.len() < 3 {
+/// APE of the camera centres of `(estimated, ground-truth)` poses; `None` (with a warning when
+/// the alignment fails) for fewer than 3 views with ground truth.
+fn ape_if_known(pairs: &[(Se3, Se3)]) -> Option<ApeSummary> {
+    if pairs.len() < 3 {
         return None;
     }
+    let (est, gt): (Vec<[f64; 3]>, Vec<[f64; 3]>) = pairs
+        .iter()
+        .map(|(e, g)| -> ([f64; 3], [f64; 3]) { (e.trans.into(), g.trans.into()) })
+        .unzip();
     ape_of_centres(&est, &gt)
         .inspect_err(|e| tracing::warn!("APE not computed: {e}"))
+        .ok()
+}
+
+/// Relative rotation error of `(estimated, ground-truth)` poses; `None` for fewer than 2 views
+/// with ground truth.
+fn rotation_error_if_known(pairs: &[(Se3, Se3)]) -> Option<RotationErrorSummary> {
+    if pairs.len() < 2 {
+        return None;
+    }
+    let (est, gt): (Vec<_>, Vec<_>) = pairs.iter().map(|(e, g)| (e.rot, g.rot)).unzip();
+    relative_rotation_error(&est, &gt)
+        .inspect_err(|e| tracing::warn!("rotation error not computed: {e}"))
         .ok()
 }
 

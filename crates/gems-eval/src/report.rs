@@ -433,6 +433,22 @@ fn metrics_section(html: &mut String, m: &MetricsReport) {
         }
         None => html.push_str("<h3>APE</h3><p>Not available (no ground-truth poses).</p>\n"),
     }
+    if let Some(r) = &m.rotation_error {
+        let _ = writeln!(
+            html,
+            "<h3>Relative rotation error (every pair of training views: the estimated \
+             camera-to-camera rotation against the ground truth's; degrees)</h3>\
+             <p>Trajectory midpoints: RMSE {:.3}°, mean {:.3}°, median {:.3}°, max {:.3}°.</p>",
+            r.rmse_deg, r.mean_deg, r.median_deg, r.max_deg
+        );
+        if let Some(i) = &m.rotation_error_init {
+            let _ = writeln!(
+                html,
+                "<p>The initial poses (before training): RMSE {:.3}°, median {:.3}°, max {:.3}°.</p>",
+                i.rmse_deg, i.median_deg, i.max_deg
+            );
+        }
+    }
 }
 
 /// Loss and PSNR curves.

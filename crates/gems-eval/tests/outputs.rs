@@ -71,6 +71,13 @@ fn metrics_json_round_trip_and_keys() {
             std: 0.1,
             max: 0.6,
         }),
+        rotation_error: Some(RotationErrorSummary {
+            rmse_deg: 1.5,
+            mean_deg: 1.2,
+            median_deg: 1.1,
+            max_deg: 3.0,
+        }),
+        rotation_error_init: None,
         steps: 7000,
         seconds: 12.5,
         gaussians: 1234,
@@ -89,6 +96,7 @@ fn metrics_json_round_trip_and_keys() {
         "nvs_no_pose_opt",
         "ape",
         "ape_init",
+        "rotation_error",
         "steps",
         "seconds",
         "gaussians",
@@ -162,6 +170,35 @@ fn tum_round_trip() {
 }
 
 #[test]
+fn relative_rotation_error_ignores_the_frame_and_measures_each_view() {
+    use gems_math::{Matrix3, So3, Vector3};
+    let gt: Vec<Matrix3<f64>> = (0..6)
+        .map(|i| So3::exp(&Vector3::new(0.05 * i as f64, 0.3 - 0.1 * i as f64, 0.02)).0)
+        .collect();
+    // A different world frame (any global rotation) changes nothing.
+    let frame = So3::exp(&Vector3::new(0.7, -0.4, 1.9)).0;
+    let est: Vec<_> = gt.iter().map(|r| frame * r).collect();
+    let same = relative_rotation_error(&est, &gt).unwrap();
+    assert!(same.rmse_deg < 1e-9 && same.max_deg < 1e-9, "{same:?}");
+    // Turning one camera by 2° about its own axis gives 2° on each of its 5 pairs, 0 on the
+    // other 10: mean 2/3°, median 0, max 2°, RMSE 2/√3°.
+    let mut turned = est;
+    let angle = 2f64.to_radians();
+    turned[3] *= So3::exp(&Vector3::new(0.0, angle, 0.0)).0;
+    let e = relative_rotation_error(&turned, &gt).unwrap();
+    assert!((e.max_deg - 2.0).abs() < 1e-9, "{e:?}");
+    assert!((e.mean_deg - 2.0 / 3.0).abs() < 1e-9, "{e:?}");
+    assert!(e.median_deg.abs() < 1e-9, "{e:?}");
+    assert!((e.rmse_deg - 2.0 / 3f64.sqrt()).abs() < 1e-9, "{e:?}");
+    // Fewer than two views, or mismatched lengths: one clear error.
+    let err = relative_rotation_error(&gt[..1], &gt[..1])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("two or more views"), "{err}");
+    assert!(relative_rotation_error(&gt[..3], &gt[..4]).is_err());
+}
+
+#[test]
 fn ape_is_invariant_to_similarity() {
     let gt: Vec<[f64; 3]> = (0..8)
         .map(|i| common::camera(i as f64 * 0.4).trans.into())
@@ -198,6 +235,18 @@ fn report_writes_html_and_figures() {
         nvs_no_pose_opt: None,
         ape: None,
         ape_init: None,
+        rotation_error: Some(RotationErrorSummary {
+            rmse_deg: 2.345,
+            mean_deg: 2.0,
+            median_deg: 1.9,
+            max_deg: 4.5,
+        }),
+        rotation_error_init: Some(RotationErrorSummary {
+            rmse_deg: 6.789,
+            mean_deg: 6.0,
+            median_deg: 5.9,
+            max_deg: 9.5,
+        }),
         steps: 10,
         seconds: 1.0,
         gaussians: 5,
@@ -251,6 +300,7 @@ fn report_writes_html_and_figures() {
     assert!(!html.contains("EDI"), "no EDI column without EDI images");
     // blurry 0.2 vs gt 0.9: 20·log10(1/0.7) = 3.10 dB; ours 0.5: 7.96 dB
     assert!(html.contains("3.10 dB") && html.contains("7.96 dB"));
+    assert!(html.contains("RMSE 2.345°") && html.contains("RMSE 6.789°"));
 
     // Ground-truth sub-frame paths are drawn as green lines beside the estimate.
     let green = |dir: &std::path::Path| {

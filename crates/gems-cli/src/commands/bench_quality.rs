@@ -64,6 +64,9 @@ struct Row {
     ape_rmse: Option<f64>,
     /// APE of the initial poses the run trained from.
     ape_init_rmse: Option<f64>,
+    /// Relative rotation error RMSE (degrees) of the trained midpoints and of the initial poses.
+    rotation_error_deg: Option<f64>,
+    rotation_error_init_deg: Option<f64>,
     seconds: Option<f64>,
     /// Why the run has no figures (e.g. the SfM failed).
     failure: Option<String>,
@@ -80,6 +83,8 @@ impl Row {
             nvs_initial: m.nvs_no_pose_opt.as_ref().map(|s| s.psnr),
             ape_rmse: m.ape.as_ref().map(|a| a.rmse),
             ape_init_rmse: m.ape_init.as_ref().map(|a| a.rmse),
+            rotation_error_deg: m.rotation_error.as_ref().map(|r| r.rmse_deg),
+            rotation_error_init_deg: m.rotation_error_init.as_ref().map(|r| r.rmse_deg),
             seconds: Some(seconds),
             failure: None,
         }
@@ -95,6 +100,8 @@ impl Row {
             nvs_initial: None,
             ape_rmse: None,
             ape_init_rmse: None,
+            rotation_error_deg: None,
+            rotation_error_init_deg: None,
             seconds: None,
             failure: Some(why),
         }
@@ -262,8 +269,8 @@ fn markdown(rows: &[Row], args: &Args) -> String {
     let f = |v: Option<f64>, unit: &str| v.map_or("—".to_owned(), |v| format!("{v:.2}{unit}"));
     let mut s = format!(
         "Schedule: {} steps; scenes: `gems synth --preset {}`{}, seeds {:?}.\n\n\
-         | seed | run | deblur midpoint | deblur refined | novel views refined | novel views at initial pose | APE RMSE (initial → trained) | wall time |\n\
-         |---|---|---|---|---|---|---|---|\n",
+         | seed | run | deblur midpoint | deblur refined | novel views refined | novel views at initial pose | APE RMSE (initial → trained) | relative rotation error RMSE (initial → trained) | wall time |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
         args.steps,
         format!("{:?}", args.preset).to_lowercase(),
         match (args.width, args.height) {
@@ -274,11 +281,11 @@ fn markdown(rows: &[Row], args: &Args) -> String {
     );
     for r in rows {
         if let Some(why) = &r.failure {
-            s.push_str(&format!("| {} | {} | {why} | | | | | |\n", r.seed, r.run));
+            s.push_str(&format!("| {} | {} | {why} | | | | | | |\n", r.seed, r.run));
             continue;
         }
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             r.seed,
             r.run,
             f(r.deblur_midpoint, " dB"),
@@ -288,6 +295,11 @@ fn markdown(rows: &[Row], args: &Args) -> String {
             match (r.ape_init_rmse, r.ape_rmse) {
                 (Some(i), Some(t)) => format!("{i:.4} → {t:.4}"),
                 (None, Some(t)) => format!("{t:.4}"),
+                _ => "—".to_owned(),
+            },
+            match (r.rotation_error_init_deg, r.rotation_error_deg) {
+                (Some(i), Some(t)) => format!("{i:.2}° → {t:.2}°"),
+                (None, Some(t)) => format!("{t:.2}°"),
                 _ => "—".to_owned(),
             },
             f(r.seconds, " s"),

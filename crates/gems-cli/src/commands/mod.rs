@@ -45,4 +45,13 @@ pub fn print_splits(m: &gems_eval::MetricsReport) {
             .map_or(String::new(), |i| format!(" (initial poses {:.4})", i.rmse));
         println!("APE RMSE of the trajectory midpoints: {:.4}{init}", a.rmse);
     }
+    if let Some(r) = &m.rotation_error {
+        let init = m.rotation_error_init.map_or(String::new(), |i| {
+            format!(" (initial poses {:.3}°)", i.rmse_deg)
+        });
+        println!(
+            "relative rotation error RMSE of the trajectory midpoints: {:.3}°{init}",
+            r.rmse_deg
+        );
+    }
 }
