@@ -131,11 +131,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(a) = eval.metrics.ape_init {
         println!("APE of the initial poses: rmse {:.5}", a.rmse);
     }
-    if let Some(r) = eval.metrics.rotation_error {
-        let init = eval.metrics.rotation_error_init.map_or(String::new(), |i| {
-            format!(" (initial poses {:.3}°)", i.rmse_deg)
-        });
-        println!("relative rotation error rmse {:.3}°{init}", r.rmse_deg);
+    if let Some(line) = super::rotation_error_line(&eval.metrics) {
+        println!("{line}");
     }
     println!("report: {}", report.display());
     Ok(())

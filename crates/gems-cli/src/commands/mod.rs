@@ -45,13 +45,20 @@ pub fn print_splits(m: &gems_eval::MetricsReport) {
             .map_or(String::new(), |i| format!(" (initial poses {:.4})", i.rmse));
         println!("APE RMSE of the trajectory midpoints: {:.4}{init}", a.rmse);
     }
-    if let Some(r) = &m.rotation_error {
-        let init = m.rotation_error_init.map_or(String::new(), |i| {
-            format!(" (initial poses {:.3}°)", i.rmse_deg)
-        });
-        println!(
-            "relative rotation error RMSE of the trajectory midpoints: {:.3}°{init}",
-            r.rmse_deg
-        );
+    if let Some(line) = rotation_error_line(m) {
+        println!("{line}");
     }
+}
+
+/// The relative rotation error of the trajectory midpoints (and of the initial poses), when the
+/// run had ground-truth poses.
+pub fn rotation_error_line(m: &gems_eval::MetricsReport) -> Option<String> {
+    let r = m.rotation_error?;
+    let init = m.rotation_error_init.map_or(String::new(), |i| {
+        format!(" (initial poses {:.3}°)", i.rmse_deg)
+    });
+    Some(format!(
+        "relative rotation error RMSE of the trajectory midpoints: {:.3}°{init}",
+        r.rmse_deg
+    ))
 }
