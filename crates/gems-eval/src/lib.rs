@@ -52,8 +52,8 @@ pub use metrics::{
 };
 pub use protocol::{
     EvalData, Evaluation, HeldOutView, attach_edi_images, eval_data_from_scene, evaluate_output,
-    evaluate_output_on, evaluation_units, open_scene_for, report_input, write_renders,
-    write_renders_on, write_trajectories,
+    evaluate_output_on, evaluation_units, open_scene_for, render_mid_exposure, report_input,
+    write_renders, write_renders_on, write_trajectories,
 };
 pub use refine::{PoseRefineConfig, Refined, refine_pose};
 pub use report::{GridRow, ReportInput, write_report};

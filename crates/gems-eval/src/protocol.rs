@@ -655,3 +655,33 @@ pub fn write_renders_on(
     }
     Ok(())
 }
+
+/// The sharp render of every training view at its mid-exposure pose (what
+/// `renders/train/<view>_mid.png` shows), with the view's name, at the resolution `size_of`
+/// gives for that name (e.g. the original photos' when training ran on downscaled copies;
+/// `None`: the trained resolution). Black background, like [`write_renders`]; not clamped.
+pub fn render_mid_exposure(
+    engine: &mut Engine,
+    output: &TrainOutput,
+    size_of: &dyn Fn(&str) -> Option<(u32, u32)>,
+) -> Result<Vec<(String, gems_data::ImageRgb)>, EvalError> {
+    let settings = gems_splat::RenderSettings::default();
+    output
+        .views
+        .iter()
+        .map(|v| {
+            let k = match size_of(&v.name) {
+                Some((w, h)) => v.intrinsics.resized(w, h),
+                None => v.intrinsics,
+            };
+            let cam = Camera::from_c2w(&k, &Se3::from(&v.mid_c2w));
+            let out = engine.forward(&output.gaussians, &[cam], &[[0.0; 3]], &settings)?;
+            let image = gems_data::ImageRgb {
+                width: k.width,
+                height: k.height,
+                data: out.rgb,
+            };
+            Ok((v.name.clone(), image))
+        })
+        .collect()
+}

@@ -88,13 +88,6 @@ pub fn resolve_init(
     if req.events.is_some() && matches!(req.init, Init::Colmap | Init::Gt | Init::GtNoisy) {
         return Err(PipelineError::EventsNeedImageInit);
     }
-    // With events, the initialiser sees the EDI-deblurred images instead of the blurry ones.
-    let init_images = || -> Result<PathBuf, PipelineError> {
-        match &req.events {
-            Some(ev) => edi_images(scene, output, ev),
-            None => Ok(scene.to_path_buf()),
-        }
-    };
     Ok(match req.init {
         Init::Colmap => InitMode::Colmap(req.colmap_model.clone()),
         Init::Gt => InitMode::Gt,
@@ -106,18 +99,137 @@ pub fn resolve_init(
             InitMode::Colmap(earlier_model(output, req.init))
         }
         Init::Sfm => InitMode::Colmap(Some(run_sfm(
-            &init_images()?,
+            &init_images(scene, output, req)?,
             &output.join("sfm"),
             seed,
             req.focal_px,
         )?)),
         Init::ColmapCli => InitMode::Colmap(Some(run_colmap(
-            &init_images()?,
+            &init_images(scene, output, req)?,
             &output.join("colmap"),
             &req.colmap_binary,
             req.focal_px,
         )?)),
     })
+}
+
+/// The images an image initialiser reads: the scene's, or with events the EDI-deblurred ones
+/// (written under `output` the first time).
+pub(crate) fn init_images(
+    scene: &Path,
+    output: &Path,
+    req: &InitRequest,
+) -> Result<PathBuf, PipelineError> {
+    match &req.events {
+        Some(ev) => edi_images(scene, output, ev),
+        None => Ok(scene.to_path_buf()),
+    }
+}
+
+/// Whether `init` estimates poses from the images, so that running it again on a first pass's
+/// sharp renders (`init.sfm_rerun_fraction`) can improve them.
+pub fn reruns_on_renders(init: Init) -> bool {
+    matches!(init, Init::Sfm | Init::ColmapCli)
+}
+
+/// The initialiser `req` names, run again on a first training's sharp renders: of the images in
+/// `source` (a scene folder or an image folder: what the first initialisation read), every view
+/// `first` trained on is replaced by its render at the mid-exposure pose (at the photo's own
+/// resolution), every other view (held out, or not registered) keeps its image, so the new model
+/// holds the same views under the same names. The images go to `<out>/images/` (PNG; a view
+/// whose file is not a PNG gets `.png` appended, and the model is renamed back), the model to
+/// `<out>/sparse/0`, which is returned. With `resume`, a model already there is reused.
+///
+/// Why: under strong blur the blurry images' tracks leave depth and camera rotation poorly
+/// determined (BENCHMARKS.md, "Structure from motion on the first pass's renders"), and the
+/// first pass's renders are deblurred.
+pub fn rerun_init_on_renders(
+    engine: &mut gems_gpu::Engine,
+    first: &gems_train::TrainOutput,
+    source: &Path,
+    out: &Path,
+    req: &InitRequest,
+    seed: u64,
+    resume: bool,
+) -> Result<PathBuf, PipelineError> {
+    let sparse = out.join("sparse").join("0");
+    if resume && sparse.join("images.bin").is_file() {
+        tracing::info!(model = %sparse.display(), "reusing the model from the first pass's renders");
+        return Ok(sparse);
+    }
+    let source = if source.join("images").is_dir() {
+        source.join("images")
+    } else {
+        source.to_path_buf()
+    };
+    let files = gems_fs::list_images(&source)?;
+    let file_name = |p: &Path| {
+        p.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let originals: std::collections::HashMap<String, PathBuf> =
+        files.iter().map(|p| (file_name(p), p.clone())).collect();
+    let sizes = |name: &str| {
+        originals
+            .get(name)
+            .and_then(|p| gems_data::image::image_dimensions(p).ok())
+    };
+    let renders = gems_eval::render_mid_exposure(engine, first, &sizes)?;
+    let images = out.join("images");
+    // A folder left by an earlier, unfinished run may hold other views.
+    if images.is_dir() {
+        std::fs::remove_dir_all(&images).map_err(|source| gems_fs::FsError {
+            path: images.clone(),
+            source,
+        })?;
+    }
+    std::fs::create_dir_all(&images).map_err(|source| PipelineError::CreateDir {
+        path: images.clone(),
+        source,
+    })?;
+    let mut renamed = std::collections::HashMap::new();
+    for (name, image) in &renders {
+        let written = if name.to_ascii_lowercase().ends_with(".png") {
+            name.clone()
+        } else {
+            format!("{name}.png")
+        };
+        gems_data::save_png(&images.join(&written), image)?;
+        renamed.insert(written, name.clone());
+    }
+    for (name, path) in &originals {
+        if !renders.iter().any(|(n, _)| n == name) {
+            let bytes = std::fs::read(path).map_err(|source| gems_fs::FsError {
+                path: path.clone(),
+                source,
+            })?;
+            gems_fs::write_atomic(&images.join(name), &bytes)?;
+        }
+    }
+    tracing::info!(
+        renders = renders.len(),
+        others = originals.len().saturating_sub(renders.len()),
+        dir = %images.display(),
+        "initialising again on the first pass's sharp renders"
+    );
+    let model = match req.init {
+        Init::ColmapCli => run_colmap(out, out, &req.colmap_binary, req.focal_px)?,
+        Init::Sfm | Init::Colmap | Init::Gt | Init::GtNoisy => {
+            run_sfm(out, out, seed, req.focal_px)?
+        }
+    };
+    if renamed.iter().any(|(written, name)| written != name) {
+        let mut m = gems_data::colmap::read_model(&model)?;
+        for img in &mut m.images {
+            if let Some(name) = renamed.get(&img.name) {
+                img.name.clone_from(name);
+            }
+        }
+        gems_data::colmap::write_model(&model, &m, gems_data::colmap::ModelFormat::Binary)
+            .map_err(PipelineError::WriteColmapModel)?;
+    }
+    Ok(model)
 }
 
 /// The model an earlier run with the same initialiser wrote into `output`, if any.
@@ -232,4 +344,152 @@ pub fn run_colmap(
         "COLMAP model imported"
     );
     Ok(sparse)
+}
+
+/// Adds to `second` every view `first` registered and `second` did not, placed in `second`'s
+/// frame by the similarity between the two models' shared cameras: its rotation the chordal mean
+/// of the camera-to-world rotations' differences R₂ᵢR₁ᵢᵀ, its scale and translation by least
+/// squares on the camera centres under that rotation (no centre-only Umeyama: a straight camera
+/// path leaves the rotation about it undetermined). Returns the names placed; none when fewer
+/// than two shared views with distinct centres fix the similarity.
+///
+/// Why: a held-out view keeps its blurry photo when the initialiser runs again on the renders,
+/// and blurry photos do not always register among sharp images; it still needs a pose for the
+/// novel-view evaluation.
+pub(crate) fn place_missing_views(
+    first: &gems_data::colmap::SparseModel,
+    second: &mut gems_data::colmap::SparseModel,
+) -> Vec<String> {
+    use gems_math::{Matrix3, So3, Vector3};
+    let c2w = |img: &gems_data::colmap::Image| {
+        let p = img.pose();
+        (
+            Matrix3::from_fn(|r, c| p.rotation[c][r]),
+            Vector3::from(p.center()),
+        )
+    };
+    let shared: Vec<_> = first
+        .images
+        .iter()
+        .filter_map(|a| second.image_by_name(&a.name).map(|b| (c2w(a), c2w(b))))
+        .collect();
+    let missing: Vec<_> = first
+        .images
+        .iter()
+        .filter(|a| second.image_by_name(&a.name).is_none())
+        .cloned()
+        .collect();
+    if missing.is_empty() || shared.len() < 2 {
+        return Vec::new();
+    }
+    let sum = shared
+        .iter()
+        .fold(Matrix3::zeros(), |acc, ((r1, _), (r2, _))| {
+            acc + r2 * r1.transpose()
+        });
+    let rot = *So3::from_matrix_orthonormalized(&sum).matrix();
+    let n = shared.len() as f64;
+    let mean1 = shared.iter().map(|((_, c), _)| c).sum::<Vector3<f64>>() / n;
+    let mean2 = shared.iter().map(|(_, (_, c))| c).sum::<Vector3<f64>>() / n;
+    let (num, den) = shared
+        .iter()
+        .fold((0.0, 0.0), |(num, den), ((_, c1), (_, c2))| {
+            let x = rot * (c1 - mean1);
+            (num + (c2 - mean2).dot(&x), den + x.norm_squared())
+        });
+    if den <= f64::EPSILON {
+        return Vec::new();
+    }
+    let scale = num / den;
+    let camera_id = second.images.first().map_or(1, |i| i.camera_id);
+    let mut next_id = second.images.iter().map(|i| i.id).max().unwrap_or(0);
+    missing
+        .into_iter()
+        .map(|img| {
+            let (r1, c1) = c2w(&img);
+            let r2 = rot * r1;
+            let c2 = mean2 + scale * (rot * (c1 - mean1));
+            let w2c = r2.transpose();
+            let t = -(w2c * c2);
+            let pose = gems_math::Pose {
+                rotation: std::array::from_fn(|r| std::array::from_fn(|c| w2c[(r, c)])),
+                translation: [t[0], t[1], t[2]],
+            };
+            next_id += 1;
+            second.images.push(gems_data::colmap::Image::from_pose(
+                next_id, camera_id, &img.name, &pose,
+            ));
+            img.name
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gems_data::colmap::{Image, SparseModel};
+    use gems_math::{Matrix3, So3, Vector3};
+
+    /// A view with camera-to-world rotation `c2w` and centre `centre`.
+    fn view_c2w(name: &str, c2w: &Matrix3<f64>, centre: &Vector3<f64>) -> Image {
+        let w2c = c2w.transpose();
+        let t = -(w2c * centre);
+        let pose = gems_math::Pose {
+            rotation: std::array::from_fn(|r| std::array::from_fn(|c| w2c[(r, c)])),
+            translation: [t[0], t[1], t[2]],
+        };
+        Image::from_pose(1, 1, name, &pose)
+    }
+
+    /// A view turned by the rotation vector `phi`, centred at `centre`.
+    fn view(name: &str, phi: [f64; 3], centre: [f64; 3]) -> Image {
+        let c2w = *So3::exp(&Vector3::from(phi)).matrix();
+        view_c2w(name, &c2w, &Vector3::from(centre))
+    }
+
+    #[test]
+    fn a_missing_view_is_placed_through_the_similarity_between_the_models() {
+        let views = [
+            view("a", [0.1, 0.0, 0.0], [0.0, 0.0, 0.0]),
+            view("b", [0.0, 0.2, 0.0], [1.0, 0.1, 0.0]),
+            view("c", [0.0, 0.0, -0.1], [2.0, 0.5, 0.3]),
+            view("held", [0.2, -0.1, 0.1], [0.5, 1.0, -0.4]),
+        ];
+        // The second model is the first under p ↦ s·R·p + t.
+        let (s, rot) = (2.5, *So3::exp(&Vector3::new(0.3, -0.7, 1.1)).matrix());
+        let t = Vector3::new(4.0, -1.0, 0.5);
+        let moved = |img: &Image| {
+            let p = img.pose();
+            let c2w = Matrix3::from_fn(|r, c| p.rotation[c][r]);
+            let centre = s * (rot * Vector3::from(p.center())) + t;
+            view_c2w(&img.name, &(rot * c2w), &centre)
+        };
+        let first = SparseModel {
+            images: views.to_vec(),
+            ..SparseModel::default()
+        };
+        let mut second = SparseModel {
+            images: views[..3].iter().map(moved).collect(),
+            ..SparseModel::default()
+        };
+        assert_eq!(
+            place_missing_views(&first, &mut second),
+            vec!["held".to_owned()]
+        );
+        let placed = second.image_by_name("held").unwrap().pose();
+        let want = moved(&views[3]).pose();
+        for r in 0..3 {
+            assert!((placed.center()[r] - want.center()[r]).abs() < 1e-9);
+            for c in 0..3 {
+                assert!((placed.rotation[r][c] - want.rotation[r][c]).abs() < 1e-9);
+            }
+        }
+
+        // One shared view cannot fix a similarity: nothing is placed.
+        let mut lone = SparseModel {
+            images: vec![moved(&views[0])],
+            ..SparseModel::default()
+        };
+        assert!(place_missing_views(&first, &mut lone).is_empty());
+    }
 }

@@ -5,7 +5,9 @@
 //!    blur-robust SfM on the blurry images ([`run_sfm`]), a COLMAP model the scene carries or a
 //!    user gives, a user-installed COLMAP run as a subprocess ([`run_colmap`]), the scene's events
 //!    deblurring the images by EDI for either initialiser ([`edi_images`], GeMS-E), or ground
-//!    truth (optionally perturbed);
+//!    truth (optionally perturbed); with `init.sfm_rerun_fraction` > 0, a first training from
+//!    that model whose sharp renders the image initialiser reconstructs again
+//!    ([`rerun_init_on_renders`]), the run proper starting from the second model;
 //! 2. **training** (gems-train), with periodic atomic checkpoints and resume;
 //! 3. **exports**: `point_cloud.ply` (input frame), `model.json`, `config.toml`;
 //! 4. **evaluation and report** (gems-eval): `metrics.json`, trajectories, renders,
@@ -24,5 +26,8 @@ mod run;
 
 pub use error::PipelineError;
 pub use gems_train::InitMode;
-pub use init::{EventInit, Init, InitRequest, edi_images, resolve_init, run_colmap, run_sfm};
+pub use init::{
+    EventInit, Init, InitRequest, edi_images, rerun_init_on_renders, reruns_on_renders,
+    resolve_init, run_colmap, run_sfm,
+};
 pub use run::{RunOutcome, TrainJob, TrainRequest, attach_edi, train_and_report, train_scene};

@@ -13,7 +13,10 @@ use gems_train::{TrainOutput, has_checkpoint, load_checkpoint, save_checkpoint};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::PipelineError;
-use crate::init::{InitRequest, resolve_init};
+use crate::init::{
+    InitRequest, init_images, place_missing_views, rerun_init_on_renders, reruns_on_renders,
+    resolve_init,
+};
 
 /// A whole run: a scene, where its initialisation comes from, and what to do after training.
 pub struct TrainRequest {
@@ -89,19 +92,130 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             f.focal_px
         })
     });
-    let mode = resolve_init(&req.scene, &req.output, &init, req.cfg.seed, req.resume)?;
+    let mut mode = resolve_init(&req.scene, &req.output, &init, req.cfg.seed, req.resume)?;
+    let mut cfg = req.cfg;
+    let mut engine = req.engine;
+    if let Some((first_steps, rest)) = cfg
+        .sfm_rerun_split()
+        .filter(|_| reruns_on_renders(init.init))
+    {
+        let rerun = req.output.join("sfm_rerun");
+        let reuse = req.resume && rerun.join("sparse").join("0").join("images.bin").is_file();
+        let mut keep_rerun = reuse;
+        if !reuse {
+            tracing::info!(
+                steps = first_steps,
+                "first pass: training from the initial model, to initialise again on its renders"
+            );
+            let mut first_cfg = cfg.clone();
+            first_cfg.steps = first_steps;
+            first_cfg.init.sfm_rerun_fraction = 0.0;
+            let first_dir = req.output.join("first_pass");
+            let (first, back) = train_and_export(
+                &TrainJob {
+                    scene: &req.scene,
+                    output: &first_dir,
+                    mode: mode.clone(),
+                    cfg: first_cfg,
+                    open: req.open.clone(),
+                    resume: req.resume,
+                    evaluate: false,
+                    lpips: &[],
+                    engine: Engine::default(),
+                    progress: req.progress,
+                },
+                engine,
+            )?;
+            engine = back;
+            let source = init_images(&req.scene, &req.output, &init)?;
+            let second =
+                rerun_init_on_renders(&mut engine, &first, &source, &rerun, &init, cfg.seed, false);
+            let rendered: Vec<String> = first.views.iter().map(|v| v.name.clone()).collect();
+            keep_rerun = accept_rerun(second, &mode, &rerun, &rendered)?;
+        }
+        if keep_rerun {
+            mode = InitMode::Colmap(Some(rerun.join("sparse").join("0")));
+            // The run proper has the steps the first pass left, and is itself one pass.
+            cfg.steps = rest;
+        }
+        cfg.init.sfm_rerun_fraction = 0.0;
+    }
     train_and_report(TrainJob {
         scene: &req.scene,
         output: &req.output,
         mode,
-        cfg: req.cfg,
+        cfg,
         open: req.open,
         resume: req.resume,
         evaluate: req.evaluate,
         lpips: &req.lpips,
-        engine: req.engine,
+        engine,
         progress: req.progress,
     })
+}
+
+/// Whether the model initialised on the first pass's renders replaces the first one: when the
+/// initialiser registered every `rendered` view the first model had. Views the first model had
+/// and it lacks (held-out photos that did not register among the renders) are then placed by
+/// the similarity between the models ([`place_missing_views`]) and the model is rewritten. A
+/// rejected model's `sparse` folder is removed, so that a resumed run decides again, the same
+/// way; its images stay for inspection.
+fn accept_rerun(
+    second: Result<PathBuf, PipelineError>,
+    first: &InitMode,
+    rerun: &Path,
+    rendered: &[String],
+) -> Result<bool, PipelineError> {
+    let InitMode::Colmap(Some(first_dir)) = first else {
+        return Err(PipelineError::Config(
+            "initialising again on renders needs the first model's folder".into(),
+        ));
+    };
+    let first = gems_data::colmap::read_model(first_dir)?;
+    let rendered_in = |m: &gems_data::colmap::SparseModel| {
+        rendered
+            .iter()
+            .filter(|n| m.image_by_name(n).is_some())
+            .count()
+    };
+    let reason = match second {
+        Ok(dir) => {
+            let mut model = gems_data::colmap::read_model(&dir)?;
+            let (views, before) = (rendered_in(&model), rendered_in(&first));
+            if views >= before {
+                let placed = place_missing_views(&first, &mut model);
+                if !placed.is_empty() {
+                    tracing::warn!(
+                        "{} did not register among the renders; placed from the first model",
+                        placed.join(", ")
+                    );
+                    gems_data::colmap::write_model(
+                        &dir,
+                        &model,
+                        gems_data::colmap::ModelFormat::Binary,
+                    )
+                    .map_err(PipelineError::WriteColmapModel)?;
+                }
+                tracing::info!(views, "training from the model initialised on the renders");
+                return Ok(true);
+            }
+            format!("it registered {views} of the trained views, the first model {before}")
+        }
+        Err(PipelineError::Sfm(e)) => format!("the initialiser failed on them: {e}"),
+        Err(e) => return Err(e),
+    };
+    tracing::warn!(
+        "initialising again on the first pass's renders did not work ({reason}); training \
+         from the first model with all the steps"
+    );
+    let sparse = rerun.join("sparse");
+    if sparse.is_dir() {
+        std::fs::remove_dir_all(&sparse).map_err(|source| gems_fs::FsError {
+            path: sparse,
+            source,
+        })?;
+    }
+    Ok(false)
 }
 
 /// A progress bar of `len` units drawn with `template`, or a hidden one.
@@ -116,7 +230,38 @@ fn progress_bar(show: bool, len: usize, template: &'static str) -> ProgressBar {
 
 /// Trains, writes `point_cloud.ply` (input frame), the model, and — unless disabled — metrics,
 /// trajectories and `report.html`.
-pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> {
+pub fn train_and_report(mut job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> {
+    let engine = std::mem::take(&mut job.engine);
+    let (output, mut engine) = train_and_export(&job, engine)?;
+    let ply = job.output.join("point_cloud.ply");
+    if !job.evaluate {
+        return Ok(RunOutcome {
+            point_cloud: ply,
+            report: None,
+            metrics: None,
+        });
+    }
+    let reporting = Reporting {
+        scene: job.scene,
+        open: &job.open,
+        output: job.output,
+        lpips: job.lpips,
+        progress: job.progress,
+    };
+    let (report, metrics) = evaluate_and_report(&reporting, &output, &mut engine)?;
+    Ok(RunOutcome {
+        point_cloud: ply,
+        report: Some(report),
+        metrics: Some(metrics),
+    })
+}
+
+/// Trains `job` on `engine` (its own `engine` field is not used), then writes `config.toml`,
+/// the model and `point_cloud.ply` (input frame); returns the result and the engine.
+fn train_and_export(
+    job: &TrainJob<'_>,
+    engine: Engine,
+) -> Result<(TrainOutput, Engine), PipelineError> {
     let scene =
         gems_data::open_scene(job.scene, &job.open).map_err(|source| PipelineError::OpenScene {
             path: job.scene.to_path_buf(),
@@ -127,8 +272,8 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
         source,
     })?;
     let pose_model = pose_model_of(&job.mode, &scene);
-    let mut trainer = start_trainer(&scene, &job.mode, job.cfg, job.resume, job.output)?;
-    trainer.set_engine(job.engine);
+    let mut trainer = start_trainer(&scene, &job.mode, job.cfg.clone(), job.resume, job.output)?;
+    trainer.set_engine(engine);
     gems_fs::write_atomic(
         &job.output.join("config.toml"),
         trainer.config().to_toml().as_bytes(),
@@ -150,27 +295,8 @@ pub fn train_and_report(job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> 
         steps = output.steps,
         "trained"
     );
-    if !job.evaluate {
-        return Ok(RunOutcome {
-            point_cloud: ply,
-            report: None,
-            metrics: None,
-        });
-    }
-    let mut engine = trainer.set_engine(Engine::cpu());
-    let reporting = Reporting {
-        scene: job.scene,
-        open: &job.open,
-        output: job.output,
-        lpips: job.lpips,
-        progress: job.progress,
-    };
-    let (report, metrics) = evaluate_and_report(&reporting, &output, &mut engine)?;
-    Ok(RunOutcome {
-        point_cloud: ply,
-        report: Some(report),
-        metrics: Some(metrics),
-    })
+    let engine = trainer.set_engine(Engine::cpu());
+    Ok((output, engine))
 }
 
 /// The COLMAP model the initial poses come from, if any (held-out views are evaluated from its
@@ -309,4 +435,81 @@ pub fn attach_edi(
         tracing::info!(views = n, dir = %edi.display(), "EDI images added to the report");
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gems_data::colmap::{Camera, CameraModel, Image, ModelFormat, SparseModel, write_model};
+
+    /// A model of the named images, image `i` at centre (i, i², 0) looking down +z; one camera,
+    /// no points.
+    fn model_with(dir: &Path, names: &[&str]) -> PathBuf {
+        let images = names
+            .iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let x = i as f64;
+                Image {
+                    id: i as u32 + 1,
+                    qvec: [1.0, 0.0, 0.0, 0.0],
+                    tvec: [-x, -x * x, 0.0],
+                    camera_id: 1,
+                    name: (*name).to_owned(),
+                    points2d: Vec::new(),
+                }
+            })
+            .collect();
+        let model = SparseModel {
+            cameras: vec![Camera {
+                id: 1,
+                model: CameraModel::SimplePinhole,
+                width: 96,
+                height: 64,
+                params: vec![80.0, 48.0, 32.0],
+            }],
+            images,
+            points: Vec::new(),
+        };
+        write_model(dir, &model, ModelFormat::Binary).unwrap();
+        dir.to_path_buf()
+    }
+
+    #[test]
+    fn the_rerun_model_is_kept_only_when_it_registers_every_trained_view() {
+        let tmp = tempfile::tempdir().unwrap();
+        let all = ["a.png", "b.png", "c.png"];
+        let first = InitMode::Colmap(Some(model_with(&tmp.path().join("first"), &all)));
+        let rerun = tmp.path().join("rerun");
+        let sparse = rerun.join("sparse").join("0");
+        let trained: Vec<String> = all.iter().map(|n| (*n).to_owned()).collect();
+
+        let second = model_with(&sparse, &all);
+        assert!(accept_rerun(Ok(second), &first, &rerun, &trained).unwrap());
+        assert!(sparse.is_dir(), "an accepted model stays");
+
+        // "c.png" held out: the second model lacks it and gets it placed from the first.
+        let second = model_with(&sparse, &all[..2]);
+        assert!(accept_rerun(Ok(second), &first, &rerun, &trained[..2]).unwrap());
+        let placed = gems_data::colmap::read_model(&sparse).unwrap();
+        assert!(placed.image_by_name("c.png").is_some());
+
+        // "c.png" trained but lost: rejected, and the model removed.
+        let second = model_with(&sparse, &all[..2]);
+        assert!(!accept_rerun(Ok(second), &first, &rerun, &trained).unwrap());
+        assert!(
+            !rerun.join("sparse").exists(),
+            "a rejected model is removed, so a resumed run decides again"
+        );
+
+        let failed = Err(PipelineError::Sfm(gems_init::sfm::SfmError::TooFewImages(
+            1,
+        )));
+        assert!(!accept_rerun(failed, &first, &rerun, &trained).unwrap());
+        let other = Err(PipelineError::Config("bad".into()));
+        assert!(
+            accept_rerun(other, &first, &rerun, &trained).is_err(),
+            "errors other than the initialiser's own stop the run"
+        );
+    }
 }

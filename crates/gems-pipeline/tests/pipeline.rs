@@ -93,3 +93,69 @@ fn a_missing_scene_is_one_error_naming_it() {
     assert!(matches!(err, PipelineError::OpenScene { .. }), "{err}");
     assert!(err.to_string().contains("no-such-scene"), "{err}");
 }
+
+#[test]
+fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene");
+    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    let run = |out: &std::path::Path| {
+        let mut req = request(&scene, out, InitRequest::new(Init::Sfm));
+        req.cfg.init.sfm_rerun_fraction = 0.5;
+        req.evaluate = false;
+        // Every view trains, so every image the SfM saw is a render the second time.
+        req.open.hold = Some(0);
+        train_scene(req).unwrap()
+    };
+    let out = dir.path().join("run");
+    let first = run(&out);
+
+    let steps = |dir: &std::path::Path| {
+        let cfg = TrainConfig::from_toml_file(&dir.join("config.toml")).unwrap();
+        (cfg.steps, cfg.init.sfm_rerun_fraction)
+    };
+    assert_eq!(
+        steps(&out.join("first_pass")),
+        (10, 0.0),
+        "first pass: half"
+    );
+    assert_eq!(steps(&out), (10, 0.0), "the run proper: the other half");
+    // The second initialisation read renders named like the scene's images, at their size.
+    let mut scene_names: Vec<String> = gems_fs::list_images(&scene.join("images"))
+        .unwrap()
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    scene_names.sort();
+    let renders = gems_fs::list_images(&out.join("sfm_rerun").join("images")).unwrap();
+    let mut render_names: Vec<String> = renders
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    render_names.sort();
+    assert_eq!(render_names, scene_names);
+    let photo = gems_data::load_image(&scene.join("images").join(&scene_names[0])).unwrap();
+    let render = gems_data::load_image(&renders[0]).unwrap();
+    assert_eq!((render.width, render.height), (photo.width, photo.height));
+    assert_ne!(
+        render.data, photo.data,
+        "a render, not a copy of the blurry photo"
+    );
+    // The run proper trained from the second model, which names the scene's images.
+    let second = out.join("sfm_rerun").join("sparse").join("0");
+    let model = gems_data::colmap::read_model(&second).unwrap();
+    assert!(model.images.iter().all(|i| scene_names.contains(&i.name)));
+    let trained = gems_train::TrainOutput::load(&out).unwrap();
+    assert!(
+        trained.init_label.contains("sfm_rerun"),
+        "{}",
+        trained.init_label
+    );
+
+    // Same seed, same result.
+    let again = run(&dir.path().join("again"));
+    assert_eq!(
+        std::fs::read(&first.point_cloud).unwrap(),
+        std::fs::read(&again.point_cloud).unwrap()
+    );
+}

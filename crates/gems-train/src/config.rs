@@ -190,6 +190,17 @@ pub struct InitConfig {
     /// Depth range (in units of the scene scale) of random points inside the camera frustums.
     pub random_near: f32,
     pub random_far: f32,
+    /// Fraction of `steps` spent on a first training whose sharp mid-exposure renders of the
+    /// training views the image initialiser (the built-in SfM, or COLMAP run by gems) then
+    /// reconstructs again, with the other views' photos as they are; the remaining steps train
+    /// from that second model, so the run costs about the same. Under strong blur the blurry
+    /// photos' tracks leave depth and camera rotation poorly determined; the renders' do not
+    /// (BENCHMARKS.md, "Structure from motion on the first pass's renders"). It needs a first
+    /// pass long enough to render sharp images (hundreds of steps). Read by gems-pipeline,
+    /// which writes the first pass to `first_pass/` and the second model to `sfm_rerun/`; the
+    /// run's own `config.toml` then holds the remaining steps and 0 here. Ignored for imported
+    /// COLMAP models and ground-truth poses. 0: one pass.
+    pub sfm_rerun_fraction: f32,
 }
 
 /// How a sparse SfM cloud is topped up to `min_points`.
@@ -214,6 +225,7 @@ impl Default for InitConfig {
             top_up: TopUp::NearPoints,
             random_near: 0.1,
             random_far: 3.0,
+            sfm_rerun_fraction: 0.0,
         }
     }
 }
@@ -347,6 +359,14 @@ impl TrainConfig {
         toml::to_string_pretty(self).expect("TrainConfig always serialises")
     }
 
+    /// How `init.sfm_rerun_fraction` splits `steps`: the first pass's steps and the steps of the
+    /// run from the second model, or `None` for one pass (also when the first pass would round
+    /// to no step, or leave none).
+    pub fn sfm_rerun_split(&self) -> Option<(usize, usize)> {
+        let first = (f64::from(self.init.sfm_rerun_fraction) * self.steps as f64).round() as usize;
+        (first > 0 && first < self.steps).then_some((first, self.steps - first))
+    }
+
     /// Checks values that would make training meaningless or panic.
     pub fn validate(&self) -> Result<(), String> {
         if self.steps == 0 {
@@ -392,6 +412,9 @@ impl TrainConfig {
         }
         if !(self.init.opacity > 0.0 && self.init.opacity < 1.0) {
             return Err("init.opacity must be in (0, 1)".into());
+        }
+        if !(0.0..1.0).contains(&self.init.sfm_rerun_fraction) {
+            return Err("init.sfm_rerun_fraction must be in [0, 1)".into());
         }
         Ok(())
     }
@@ -571,5 +594,29 @@ mod tests {
         assert!(levels[300..].iter().all(|&l| l == 0));
         c.coarse_to_fine.fraction = 0.0;
         assert_eq!(c.resolution_level(0), 0);
+    }
+
+    #[test]
+    fn sfm_rerun_fraction_splits_the_steps_and_rejects_bad_values() {
+        let mut c = TrainConfig {
+            steps: 3000,
+            ..TrainConfig::default()
+        };
+        assert_eq!(c.sfm_rerun_split(), None);
+        c.init.sfm_rerun_fraction = 1.0 / 3.0;
+        assert_eq!(c.sfm_rerun_split(), Some((1000, 2000)));
+        c.steps = 1;
+        assert_eq!(c.sfm_rerun_split(), None, "a first pass of no step");
+        c.steps = 2;
+        c.init.sfm_rerun_fraction = 0.9;
+        assert_eq!(
+            c.sfm_rerun_split(),
+            None,
+            "no step left for the second pass"
+        );
+        c.init.sfm_rerun_fraction = 1.0;
+        assert!(c.validate().unwrap_err().contains("sfm_rerun_fraction"));
+        c.init.sfm_rerun_fraction = -0.1;
+        assert!(c.validate().is_err());
     }
 }
