@@ -102,6 +102,7 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     let run = |out: &std::path::Path| {
         let mut req = request(&scene, out, InitRequest::new(Init::Sfm));
         req.cfg.init.sfm_rerun_fraction = 0.5;
+        req.cfg.init.sfm_rerun_min_steps = 1;
         req.evaluate = false;
         // Every view trains, so every image the SfM saw is a render the second time.
         req.open.hold = Some(0);

@@ -201,6 +201,10 @@ pub struct InitConfig {
     /// run's own `config.toml` then holds the remaining steps and 0 here. Ignored for imported
     /// COLMAP models and ground-truth poses. 0: one pass.
     pub sfm_rerun_fraction: f32,
+    /// The shortest first pass `sfm_rerun_fraction` runs: below it (short runs, tests, the demo's
+    /// 1000 steps) the run is one pass, because a first pass of a few hundred steps does not yet
+    /// render sharp enough images to help (measured from 1000 steps up).
+    pub sfm_rerun_min_steps: usize,
 }
 
 /// How a sparse SfM cloud is topped up to `min_points`.
@@ -225,7 +229,8 @@ impl Default for InitConfig {
             top_up: TopUp::NearPoints,
             random_near: 0.1,
             random_far: 3.0,
-            sfm_rerun_fraction: 0.0,
+            sfm_rerun_fraction: 1.0 / 3.0,
+            sfm_rerun_min_steps: 1000,
         }
     }
 }
@@ -360,11 +365,12 @@ impl TrainConfig {
     }
 
     /// How `init.sfm_rerun_fraction` splits `steps`: the first pass's steps and the steps of the
-    /// run from the second model, or `None` for one pass (also when the first pass would round
-    /// to no step, or leave none).
+    /// run from the second model, or `None` for one pass (also when the first pass would be
+    /// shorter than `init.sfm_rerun_min_steps` or than one step, or leave no step).
     pub fn sfm_rerun_split(&self) -> Option<(usize, usize)> {
         let first = (f64::from(self.init.sfm_rerun_fraction) * self.steps as f64).round() as usize;
-        (first > 0 && first < self.steps).then_some((first, self.steps - first))
+        (first >= self.init.sfm_rerun_min_steps.max(1) && first < self.steps)
+            .then_some((first, self.steps - first))
     }
 
     /// Checks values that would make training meaningless or panic.
@@ -602,9 +608,15 @@ mod tests {
             steps: 3000,
             ..TrainConfig::default()
         };
-        assert_eq!(c.sfm_rerun_split(), None);
-        c.init.sfm_rerun_fraction = 1.0 / 3.0;
-        assert_eq!(c.sfm_rerun_split(), Some((1000, 2000)));
+        assert_eq!(c.sfm_rerun_split(), Some((1000, 2000)), "the default");
+        c.steps = 2990;
+        assert_eq!(c.sfm_rerun_split(), None, "a first pass under 1000 steps");
+        c.steps = 7000;
+        assert_eq!(c.sfm_rerun_split(), Some((2333, 4667)));
+        c.init.sfm_rerun_fraction = 0.0;
+        assert_eq!(c.sfm_rerun_split(), None, "0: one pass");
+        c.init.sfm_rerun_min_steps = 0;
+        c.init.sfm_rerun_fraction = 0.5;
         c.steps = 1;
         assert_eq!(c.sfm_rerun_split(), None, "a first pass of no step");
         c.steps = 2;
@@ -614,6 +626,8 @@ mod tests {
             None,
             "no step left for the second pass"
         );
+        c.steps = 20;
+        assert_eq!(c.sfm_rerun_split(), Some((18, 2)));
         c.init.sfm_rerun_fraction = 1.0;
         assert!(c.validate().unwrap_err().contains("sfm_rerun_fraction"));
         c.init.sfm_rerun_fraction = -0.1;
