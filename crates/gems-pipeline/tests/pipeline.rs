@@ -99,8 +99,9 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("scene");
     gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
-    let run = |out: &std::path::Path| {
+    let run_with = |out: &std::path::Path, resume: bool| {
         let mut req = request(&scene, out, InitRequest::new(Init::Sfm));
+        req.resume = resume;
         req.cfg.init.sfm_rerun_fraction = 0.5;
         req.cfg.init.sfm_rerun_min_steps = 1;
         req.evaluate = false;
@@ -108,6 +109,7 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
         req.open.hold = Some(0);
         train_scene(req).unwrap()
     };
+    let run = |out: &std::path::Path| run_with(out, false);
     let out = dir.path().join("run");
     let first = run(&out);
 
@@ -154,9 +156,25 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     );
 
     // Same seed, same result.
+    let cloud = std::fs::read(&first.point_cloud).unwrap();
     let again = run(&dir.path().join("again"));
-    assert_eq!(
-        std::fs::read(&first.point_cloud).unwrap(),
-        std::fs::read(&again.point_cloud).unwrap()
-    );
+    assert_eq!(cloud, std::fs::read(&again.point_cloud).unwrap());
+
+    // Resumed after the second model was written, or after the first pass only: the same run.
+    let forget_run_proper = || {
+        for f in [
+            "checkpoint.json",
+            "checkpoint.safetensors",
+            "point_cloud.ply",
+        ] {
+            std::fs::remove_file(out.join(f)).unwrap();
+        }
+    };
+    forget_run_proper();
+    let resumed = run_with(&out, true);
+    assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
+    forget_run_proper();
+    std::fs::remove_dir_all(out.join("sfm_rerun")).unwrap();
+    let resumed = run_with(&out, true);
+    assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
 }
