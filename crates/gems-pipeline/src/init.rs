@@ -138,7 +138,7 @@ pub fn reruns_on_renders(init: Init) -> bool {
 /// resolution), every other view (held out, or not registered) keeps its image, so the new model
 /// holds the same views under the same names. The images go to `<out>/images/` (PNG; a view
 /// whose file is not a PNG gets `.png` appended, and the model is renamed back), the model to
-/// `<out>/sparse/0`, which is returned. With `resume`, a model already there is reused.
+/// `<out>/sparse/0`, which is returned.
 ///
 /// Why: under strong blur the blurry images' tracks leave depth and camera rotation poorly
 /// determined (BENCHMARKS.md, "Structure from motion on the first pass's renders"), and the
@@ -150,13 +150,7 @@ pub fn rerun_init_on_renders(
     out: &Path,
     req: &InitRequest,
     seed: u64,
-    resume: bool,
 ) -> Result<PathBuf, PipelineError> {
-    let sparse = out.join("sparse").join("0");
-    if resume && sparse.join("images.bin").is_file() {
-        tracing::info!(model = %sparse.display(), "reusing the model from the first pass's renders");
-        return Ok(sparse);
-    }
     let source = if source.join("images").is_dir() {
         source.join("images")
     } else {

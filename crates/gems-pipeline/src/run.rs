@@ -102,7 +102,9 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         let rerun = req.output.join("sfm_rerun");
         let reuse = req.resume && rerun.join("sparse").join("0").join("images.bin").is_file();
         let mut keep_rerun = reuse;
-        if !reuse {
+        if reuse {
+            tracing::info!(dir = %rerun.display(), "reusing the model from the first pass's renders");
+        } else {
             tracing::info!(
                 steps = first_steps,
                 "first pass: training from the initial model, to initialise again on its renders"
@@ -129,7 +131,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             engine = back;
             let source = init_images(&req.scene, &req.output, &init)?;
             let second =
-                rerun_init_on_renders(&mut engine, &first, &source, &rerun, &init, cfg.seed, false);
+                rerun_init_on_renders(&mut engine, &first, &source, &rerun, &init, cfg.seed);
             let rendered: Vec<String> = first.views.iter().map(|v| v.name.clone()).collect();
             keep_rerun = accept_rerun(second, &mode, &rerun, &rendered)?;
         }
