@@ -191,6 +191,51 @@ fn bad_input_gives_one_clear_error() {
     );
 }
 
+#[test]
+fn sfm_tracking_density_flags_reach_the_sfm() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let points = |extra: &[&str], name: &str| {
+        let mut args = vec!["sfm", s(&scene), "-o"];
+        let out = dir.path().join(name);
+        args.push(s(&out));
+        args.extend_from_slice(extra);
+        let run = gems(&args);
+        ok(&run);
+        // "registered 8/8 views, 123 points, …"
+        let text = stdout(&run);
+        let field = text
+            .split(", ")
+            .find(|f| f.ends_with(" points"))
+            .unwrap_or_else(|| panic!("no point count in {text}"));
+        field.trim_end_matches(" points").parse::<usize>().unwrap()
+    };
+    let default = points(&[], "default");
+    let dense = points(
+        &["--grid-spacing", "0.02", "--max-query-points", "5000"],
+        "dense",
+    );
+    assert!(
+        dense > default,
+        "{dense} points densely, {default} by default"
+    );
+
+    let bad = gems(&[
+        "sfm",
+        s(&scene),
+        "-o",
+        s(&dir.path().join("bad")),
+        "--grid-spacing",
+        "0.9",
+    ]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("grid_spacing") && !err.contains("panicked"),
+        "{err}"
+    );
+}
+
 /// Every file and folder under `root` with its content hash (FNV-1a), to prove a command left a
 /// scene exactly as it was.
 fn snapshot(root: &Path) -> std::collections::BTreeMap<PathBuf, u64> {

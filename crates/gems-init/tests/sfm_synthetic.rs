@@ -172,6 +172,28 @@ fn one_image_is_a_clear_error() {
 }
 
 #[test]
+fn bad_tracking_density_is_a_clear_error() {
+    let s = common::scene(2, 96, 72, 1, 0.1, 1);
+    for opts in [
+        SfmOptions {
+            grid_spacing_frac: f32::NAN,
+            ..SfmOptions::default()
+        },
+        SfmOptions {
+            grid_spacing_frac: -0.1,
+            ..SfmOptions::default()
+        },
+        SfmOptions {
+            max_query_points: 0,
+            ..SfmOptions::default()
+        },
+    ] {
+        let e = run_sfm(&s.images, &opts).unwrap_err();
+        assert!(matches!(e, SfmError::InvalidOption(_)), "{e}");
+    }
+}
+
+#[test]
 fn identical_images_are_a_clear_error() {
     let s = common::scene(1, 96, 72, 1, 0.1, 1);
     let imgs = vec![

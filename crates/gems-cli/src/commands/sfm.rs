@@ -23,6 +23,14 @@ pub struct Args {
     /// Keypoints per image.
     #[arg(long)]
     pub max_features: Option<usize>,
+    /// Points per view tracked into its neighbours (its keypoints first, then grid points);
+    /// each becomes at most one sparse point, and tracking time grows with it (default: 300).
+    #[arg(long)]
+    pub max_query_points: Option<usize>,
+    /// Spacing of the grid of extra tracking points, as a fraction of the working level's long
+    /// side (default: 0.04; 0 tracks keypoints only).
+    #[arg(long)]
+    pub grid_spacing: Option<f32>,
     /// RANSAC seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -85,6 +93,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(m) = args.max_features {
         opts.max_features = m;
+    }
+    if let Some(q) = args.max_query_points {
+        opts.max_query_points = q;
+    }
+    if let Some(g) = args.grid_spacing {
+        opts.grid_spacing_frac = g;
     }
     tracing::info!(images = images.len(), "running structure from motion");
     let result = sfm::run_sfm(&images, &opts)?;

@@ -545,6 +545,11 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
             "max_features ≥ 16 and max_reproj_px > 0 required".into(),
         ));
     }
+    if !(0.0..=0.5).contains(&opts.grid_spacing_frac) || opts.max_query_points == 0 {
+        return Err(SfmError::InvalidOption(
+            "grid_spacing_frac in [0, 0.5] and max_query_points ≥ 1 required".into(),
+        ));
+    }
     let (w0, h0) = images[0].image.dimensions();
     for im in images {
         let (w, h) = im.image.dimensions();
