@@ -137,8 +137,10 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         }
         if keep_rerun {
             mode = InitMode::Colmap(Some(rerun.join("sparse").join("0")));
-            // The run proper has the steps the first pass left, and is itself one pass.
+            // The run proper has the steps the first pass left, and is itself one pass; its
+            // initial poses are now accurate enough for straight paths first.
             cfg.steps = rest;
+            cfg.pose.straight_fraction = cfg.init.sfm_rerun_straight_fraction;
         }
         cfg.init.sfm_rerun_fraction = 0.0;
     }

@@ -115,14 +115,22 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
 
     let steps = |dir: &std::path::Path| {
         let cfg = TrainConfig::from_toml_file(&dir.join("config.toml")).unwrap();
-        (cfg.steps, cfg.init.sfm_rerun_fraction)
+        (
+            cfg.steps,
+            cfg.init.sfm_rerun_fraction,
+            cfg.pose.straight_fraction,
+        )
     };
     assert_eq!(
         steps(&out.join("first_pass")),
-        (10, 0.0),
-        "first pass: half"
+        (10, 0.0, 0.0),
+        "first pass: half, with the run's own pose.straight_fraction"
     );
-    assert_eq!(steps(&out), (10, 0.0), "the run proper: the other half");
+    assert_eq!(
+        steps(&out),
+        (10, 0.0, 0.15),
+        "the run proper: the other half, with init.sfm_rerun_straight_fraction"
+    );
     // The second initialisation read renders named like the scene's images, at their size.
     let mut scene_names: Vec<String> = gems_fs::list_images(&scene.join("images"))
         .unwrap()

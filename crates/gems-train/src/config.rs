@@ -112,7 +112,9 @@ pub struct PoseConfig {
     /// on the held-out seed (3000 steps) it lost 0.8 dB of novel views and left the cameras twice as
     /// far from the truth (APE 0.090 against 0.046), while from ground-truth poses it gained +2.3 dB refined deblurring and
     /// +2.2 dB novel views there (BENCHMARKS.md, "Straight paths first"). Set 0.15 when the
-    /// initial poses are accurate (ground truth, a calibrated rig).
+    /// initial poses are accurate (ground truth, a calibrated rig). A run that initialises again
+    /// on its first pass's renders trains from that model with `init.sfm_rerun_straight_fraction`
+    /// instead.
     pub straight_fraction: f64,
 }
 
@@ -205,6 +207,15 @@ pub struct InitConfig {
     /// 1000 steps) the run is one pass, because a first pass of a few hundred steps does not yet
     /// render sharp enough images to help (measured from 1000 steps up).
     pub sfm_rerun_min_steps: usize,
+    /// `pose.straight_fraction` of the run proper, the training from the model made on the
+    /// first pass's renders. Straight paths first help when the initial poses are accurate and
+    /// hurt from the blurry photos' SfM (see `pose.straight_fraction`); the renders' SfM is
+    /// accurate enough: 0.15 gained +1.3 / +0.9 dB refined deblurring, +1.0 / +0.4 dB refined
+    /// novel views and +1.8 / +2.2 dB at the trajectory midpoint on seeds 4 and 5 of
+    /// `gems bench-quality`'s scenes, 2000 steps from the same second models (BENCHMARKS.md,
+    /// "Structure from motion on the first pass's renders"). The first pass keeps
+    /// `pose.straight_fraction`.
+    pub sfm_rerun_straight_fraction: f64,
 }
 
 /// How a sparse SfM cloud is topped up to `min_points`.
@@ -231,6 +242,7 @@ impl Default for InitConfig {
             random_far: 3.0,
             sfm_rerun_fraction: 1.0 / 3.0,
             sfm_rerun_min_steps: 1000,
+            sfm_rerun_straight_fraction: 0.15,
         }
     }
 }
@@ -421,6 +433,9 @@ impl TrainConfig {
         }
         if !(0.0..1.0).contains(&self.init.sfm_rerun_fraction) {
             return Err("init.sfm_rerun_fraction must be in [0, 1)".into());
+        }
+        if !(0.0..=1.0).contains(&self.init.sfm_rerun_straight_fraction) {
+            return Err("init.sfm_rerun_straight_fraction must be in [0, 1]".into());
         }
         Ok(())
     }
@@ -632,5 +647,9 @@ mod tests {
         assert!(c.validate().unwrap_err().contains("sfm_rerun_fraction"));
         c.init.sfm_rerun_fraction = -0.1;
         assert!(c.validate().is_err());
+        c.init.sfm_rerun_fraction = 0.5;
+        assert!(c.validate().is_ok());
+        c.init.sfm_rerun_straight_fraction = 1.5;
+        assert!(c.validate().unwrap_err().contains("straight_fraction"));
     }
 }
