@@ -28,6 +28,16 @@ fn ok(out: &Output) {
     );
 }
 
+/// The command failed with one clear error that mentions `needle`, not a panic.
+fn fails_clearly(out: &Output, needle: &str) {
+    assert!(
+        !out.status.success(),
+        "expected a failure mentioning {needle}"
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(needle) && !err.contains("panicked"), "{err}");
+}
+
 /// `gems train <scene> -o <out> <extra…>`.
 fn train(scene: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec![
@@ -149,12 +159,7 @@ fn bad_input_gives_one_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("no-such-scene");
     let out = train(&missing, &dir.path().join("run"), &["--steps", "5"]);
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("no-such-scene") && !err.contains("panicked"),
-        "{err}"
-    );
+    fails_clearly(&out, "no-such-scene");
 
     // A COLMAP that is not installed: the error names the executable.
     let scene = tiny_scene(dir.path());
@@ -170,12 +175,7 @@ fn bad_input_gives_one_clear_error() {
             "5",
         ],
     );
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("/nonexistent/colmap") && !err.contains("panicked"),
-        "{err}"
-    );
+    fails_clearly(&out, "/nonexistent/colmap");
 
     // --events needs an initialiser that reads the deblurred images.
     let out = train(
@@ -183,12 +183,7 @@ fn bad_input_gives_one_clear_error() {
         &dir.path().join("run3"),
         &["--init", "gt", "--events"],
     );
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("--events") && !err.contains("panicked"),
-        "{err}"
-    );
+    fails_clearly(&out, "--events");
 }
 
 #[test]
@@ -196,11 +191,8 @@ fn sfm_tracking_density_flags_reach_the_sfm() {
     let dir = tempfile::tempdir().unwrap();
     let scene = tiny_scene(dir.path());
     let points = |extra: &[&str], name: &str| {
-        let mut args = vec!["sfm", s(&scene), "-o"];
         let out = dir.path().join(name);
-        args.push(s(&out));
-        args.extend_from_slice(extra);
-        let run = gems(&args);
+        let run = gems(&[&["sfm", s(&scene), "-o", s(&out)], extra].concat());
         ok(&run);
         // "registered 8/8 views, 123 points, …"
         let text = stdout(&run);
@@ -228,12 +220,7 @@ fn sfm_tracking_density_flags_reach_the_sfm() {
         "--grid-spacing",
         "0.9",
     ]);
-    assert!(!bad.status.success());
-    let err = String::from_utf8_lossy(&bad.stderr);
-    assert!(
-        err.contains("grid_spacing") && !err.contains("panicked"),
-        "{err}"
-    );
+    fails_clearly(&bad, "grid_spacing");
 }
 
 /// Every file and folder under `root` with its content hash (FNV-1a), to prove a command left a
@@ -838,12 +825,7 @@ fn device_gpu_trains_evaluates_and_renders() {
     // No backend with an adapter (DX12 is not built on Linux): one clear error.
     if cfg!(target_os = "linux") {
         let out = render("dx12");
-        assert!(!out.status.success());
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            err.contains("--device: no GPU adapter is available") && !err.contains("panicked"),
-            "{err}"
-        );
+        fails_clearly(&out, "--device: no GPU adapter is available");
     }
 }
 
