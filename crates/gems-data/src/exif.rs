@@ -84,11 +84,7 @@ pub fn focal_from_exif(path: &Path, width: u32, height: u32) -> Option<FocalSour
 /// The EXIF focal of the first photo in `dir` (a scene folder with `images/`, or a folder of
 /// photos) that has one, at that photo's full size: what the SfM on that folder should use.
 pub fn folder_focal(dir: &Path) -> Option<FocalSource> {
-    let img_dir = if dir.join("images").is_dir() {
-        dir.join("images")
-    } else {
-        dir.to_path_buf()
-    };
+    let img_dir = gems_fs::image_folder(dir);
     gems_fs::list_images(&img_dir).ok()?.iter().find_map(|p| {
         let (w, h) = crate::image::image_dimensions(p).ok()?;
         focal_from_exif(p, w, h)

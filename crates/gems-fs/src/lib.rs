@@ -99,6 +99,17 @@ fn is_image_file_name(path: &Path) -> bool {
         .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg"))
 }
 
+/// The folder holding a scene's photos: `<dir>/images` when it exists (a scene folder), else
+/// `dir` itself (a folder of photos).
+pub fn image_folder(dir: &Path) -> PathBuf {
+    let images = dir.join("images");
+    if images.is_dir() {
+        images
+    } else {
+        dir.to_path_buf()
+    }
+}
+
 /// The image files (png/jpg/jpeg, any case) directly inside `dir`, sorted by path. Hidden files
 /// (name starting with `.`, e.g. macOS `._x.jpg` resource forks) and folders are left out.
 pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>, FsError> {
@@ -185,5 +196,16 @@ mod tests {
         assert_eq!(names, ["a.png", "b.JPG", "c.jpeg"]);
         let missing = dir.path().join("missing");
         assert_eq!(list_images(&missing).unwrap_err().path, missing);
+    }
+
+    #[test]
+    fn image_folder_is_images_inside_a_scene_else_the_folder_itself() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(image_folder(dir.path()), dir.path());
+        std::fs::write(dir.path().join("images"), b"").unwrap();
+        assert_eq!(image_folder(dir.path()), dir.path(), "a file named images");
+        std::fs::remove_file(dir.path().join("images")).unwrap();
+        std::fs::create_dir(dir.path().join("images")).unwrap();
+        assert_eq!(image_folder(dir.path()), dir.path().join("images"));
     }
 }

@@ -151,11 +151,7 @@ pub fn rerun_init_on_renders(
     req: &InitRequest,
     seed: u64,
 ) -> Result<PathBuf, PipelineError> {
-    let source = if source.join("images").is_dir() {
-        source.join("images")
-    } else {
-        source.to_path_buf()
-    };
+    let source = gems_fs::image_folder(source);
     let files = gems_fs::list_images(&source)?;
     let file_name = |p: &Path| {
         p.file_name()
@@ -316,11 +312,7 @@ pub fn run_colmap(
     binary: &Path,
     focal_px: Option<f64>,
 ) -> Result<PathBuf, PipelineError> {
-    let img_dir = if images.join("images").is_dir() {
-        images.join("images")
-    } else {
-        images.to_path_buf()
-    };
+    let img_dir = gems_fs::image_folder(images);
     let opts = gems_init::sfm::ColmapCliOptions {
         binary: binary.to_path_buf(),
         focal_px,

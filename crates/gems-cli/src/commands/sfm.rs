@@ -56,11 +56,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })
     });
     if args.colmap_cli {
-        let img_dir = if args.scene.join("images").is_dir() {
-            args.scene.join("images")
-        } else {
-            args.scene.clone()
-        };
+        let img_dir = gems_fs::image_folder(&args.scene);
         let opts = ColmapCliOptions {
             binary: args.colmap_binary.clone(),
             focal_px: focal,

@@ -252,11 +252,7 @@ pub(crate) struct PairMatches {
 /// (png/jpg/jpeg, not hidden), sorted by file name: the listing gems-data opens scenes with
 /// (`gems_fs::list_images`), so the SfM model names the images the trainer reads.
 pub fn load_images(dir: &std::path::Path) -> Result<Vec<SfmImage>, SfmError> {
-    let img_dir = if dir.join("images").is_dir() {
-        dir.join("images")
-    } else {
-        dir.to_path_buf()
-    };
+    let img_dir = gems_fs::image_folder(dir);
     let files = gems_fs::list_images(&img_dir).map_err(|e| SfmError::Read {
         path: e.path,
         source: Box::new(e.source),
