@@ -899,3 +899,42 @@ fn bench_quality_writes_the_four_rows() {
     let again = gems(&["bench-quality", "-o", s(&out), "--preset", "tiny"]);
     assert!(!again.status.success());
 }
+
+/// `gems bench-quality --rows` trains only the rows asked for, in the table's order, and still
+/// gives the blurry input when only the ground-truth run is blurry; an unknown row is one clear
+/// error.
+#[test]
+fn bench_quality_runs_only_the_rows_asked_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bench");
+    let args = |rows: &str| {
+        gems(&[
+            "bench-quality",
+            "-o",
+            s(&out),
+            "--seeds",
+            "3",
+            "--preset",
+            "tiny",
+            "--steps",
+            "3",
+            "--rows",
+            rows,
+        ])
+    };
+    ok(&args("ceiling,gt"));
+    let table = std::fs::read_to_string(out.join("quality.md")).unwrap();
+    let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| 3 |")).collect();
+    assert_eq!(rows.len(), 3, "{table}");
+    for (row, name) in
+        rows.iter()
+            .zip(["blurry input", "GeMS, ground-truth poses", "sharp ceiling"])
+    {
+        assert!(row.contains(name) && row.contains(" dB"), "{row}");
+    }
+    assert!(!out.join("seed3/gems_sfm").exists());
+    assert!(out.join("seed3/ceiling/metrics.json").is_file());
+    let other = dir.path().join("other");
+    let bad = gems(&["bench-quality", "-o", s(&other), "--rows", "sfm,sharp"]);
+    fails_clearly(&bad, "invalid value 'sharp' for '--rows");
+}

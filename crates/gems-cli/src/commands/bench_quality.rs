@@ -7,6 +7,9 @@
 //! 4. the sharp ceiling: the same engine and schedule with n = 1 on the sharp mid-exposure frames,
 //!    SfM on them.
 //!
+//! `--rows` trains only some of 2–4 (e.g. the ceiling of a seed whose other rows were already
+//! run by `gems train`); the blurry-input row comes with either blurry run.
+//!
 //! Columns: deblurring at the trajectory midpoint and after the GeMS authors' 100-step pose
 //! refinement, novel views refined and at their initial pose, APE, and the wall time of the run
 //! (the SfM rows' initialisation included, training, evaluation). Writes `quality.md` (the table) and `quality.json` into the output folder;
@@ -50,6 +53,20 @@ pub struct Args {
     /// Where the splatting runs (see `gems train --device`).
     #[arg(long, default_value = "auto")]
     pub device: gems_gpu::DeviceChoice,
+    /// Which training rows to run, in the table's order whatever the order given here.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [RowKind::Sfm, RowKind::Gt, RowKind::Ceiling])]
+    pub rows: Vec<RowKind>,
+}
+
+/// A training row of the table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RowKind {
+    /// GeMS from the built-in SfM on the blurry images.
+    Sfm,
+    /// GeMS from the ground-truth poses.
+    Gt,
+    /// The sharp ceiling (n = 1 on the sharp frames, SfM on them).
+    Ceiling,
 }
 
 /// One row of the table.
@@ -165,34 +182,54 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 Err(e) => Err(anyhow::Error::from(e)),
             }
         };
-        let gems_sfm = sfm_row("GeMS, built-in SfM", &scene, &dir.join("gems_sfm"), &cfg)?;
-        let input = read_metrics(&dir.join("gems_sfm"))
-            .ok()
-            .and_then(|m| m.input);
-        rows.push(Row {
-            deblur_midpoint: input.map(|s| s.psnr),
-            ..Row::failed(seed, "blurry input", String::new())
-        });
-        rows.push(gems_sfm);
-        rows.push(train_row(
-            seed,
-            "GeMS, ground-truth poses",
-            &scene,
-            &dir.join("gems_gt"),
-            InitMode::Gt,
-            &cfg,
-            args.device,
-        )?);
-        let ceiling = TrainConfig {
-            num_virtual_views: 1,
-            ..cfg.clone()
+        let wants = |k: RowKind| args.rows.contains(&k);
+        let gems_sfm = if wants(RowKind::Sfm) {
+            Some(sfm_row(
+                "GeMS, built-in SfM",
+                &scene,
+                &dir.join("gems_sfm"),
+                &cfg,
+            )?)
+        } else {
+            None
         };
-        rows.push(sfm_row(
-            "sharp ceiling (n = 1, sharp frames, SfM)",
-            &sharp,
-            &dir.join("ceiling"),
-            &ceiling,
-        )?);
+        let gems_gt = if wants(RowKind::Gt) {
+            Some(train_row(
+                seed,
+                "GeMS, ground-truth poses",
+                &scene,
+                &dir.join("gems_gt"),
+                InitMode::Gt,
+                &cfg,
+                args.device,
+            )?)
+        } else {
+            None
+        };
+        // The blurry input is every blurry run's `input` figure: read it from whichever ran.
+        let input = ["gems_sfm", "gems_gt"]
+            .iter()
+            .find_map(|run| read_metrics(&dir.join(run)).ok().and_then(|m| m.input));
+        if let Some(input) = input {
+            rows.push(Row {
+                deblur_midpoint: Some(input.psnr),
+                ..Row::failed(seed, "blurry input", String::new())
+            });
+        }
+        rows.extend(gems_sfm);
+        rows.extend(gems_gt);
+        if wants(RowKind::Ceiling) {
+            let ceiling = TrainConfig {
+                num_virtual_views: 1,
+                ..cfg.clone()
+            };
+            rows.push(sfm_row(
+                "sharp ceiling (n = 1, sharp frames, SfM)",
+                &sharp,
+                &dir.join("ceiling"),
+                &ceiling,
+            )?);
+        }
     }
     for r in &mut rows {
         if r.failure.as_deref() == Some("") {
