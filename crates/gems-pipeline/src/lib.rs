@@ -7,8 +7,9 @@
 //!    deblurring the images by EDI for either initialiser ([`edi_images`], GeMS-E), or ground
 //!    truth (optionally perturbed); with `init.sfm_rerun_fraction` > 0, a first training from
 //!    that model whose sharp renders the image initialiser reconstructs again
-//!    ([`rerun_init_on_renders`]), the run proper starting from the second model (with
-//!    `init.sfm_rerun_straight_fraction` as its `pose.straight_fraction`);
+//!    ([`rerun_init_on_renders`]), the run proper starting from the second model; trainings
+//!    from accurate poses (that second model, or ground truth) take
+//!    `init.accurate_poses_straight_fraction` as their `pose.straight_fraction`;
 //! 2. **training** (gems-train), with periodic atomic checkpoints and resume;
 //! 3. **exports**: `point_cloud.ply` (input frame), `model.json`, `config.toml`;
 //! 4. **evaluation and report** (gems-eval): `metrics.json`, trajectories, renders,

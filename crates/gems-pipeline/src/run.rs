@@ -14,7 +14,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::PipelineError;
 use crate::init::{
-    InitRequest, init_images, place_missing_views, rerun_init_on_renders, reruns_on_renders,
+    Init, InitRequest, init_images, place_missing_views, rerun_init_on_renders, reruns_on_renders,
     resolve_init,
 };
 
@@ -94,6 +94,10 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
     });
     let mut mode = resolve_init(&req.scene, &req.output, &init, req.cfg.seed, req.resume)?;
     let mut cfg = req.cfg;
+    if init.init == Init::Gt {
+        // Exact initial poses: straight paths first (`init.accurate_poses_straight_fraction`).
+        cfg.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
+    }
     let mut engine = req.engine;
     if let Some((first_steps, rest)) = cfg
         .sfm_rerun_split()
@@ -140,7 +144,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             // The run proper has the steps the first pass left, and is itself one pass; its
             // initial poses are now accurate enough for straight paths first.
             cfg.steps = rest;
-            cfg.pose.straight_fraction = cfg.init.sfm_rerun_straight_fraction;
+            cfg.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
         }
         cfg.init.sfm_rerun_fraction = 0.0;
     }

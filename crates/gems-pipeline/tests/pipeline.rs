@@ -54,6 +54,12 @@ fn tiny_scene_end_to_end_from_rust() {
         deblur.psnr
     );
     assert!(metrics.ape.is_some(), "ground-truth poses give an APE");
+    // Exact poses train straight paths first.
+    let cfg = TrainConfig::from_toml_file(&out.join("config.toml")).unwrap();
+    assert_eq!(
+        cfg.pose.straight_fraction,
+        TrainConfig::default().init.accurate_poses_straight_fraction
+    );
     // Trained from the ground-truth poses: the initial poses are the truth.
     assert!(
         metrics.ape_init.unwrap().rmse < 1e-9,
@@ -129,7 +135,7 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     assert_eq!(
         steps(&out),
         (10, 0.0, 0.15),
-        "the run proper: the other half, with init.sfm_rerun_straight_fraction"
+        "the run proper: the other half, with init.accurate_poses_straight_fraction"
     );
     // The second initialisation read renders named like the scene's images, at their size.
     let mut scene_names: Vec<String> = gems_fs::list_images(&scene.join("images"))

@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use gems_eval::MetricsReport;
-use gems_pipeline::{InitMode, TrainJob, train_and_report};
+use gems_pipeline::Init;
 use gems_synth::SynthConfig;
 use gems_train::TrainConfig;
 use serde::Serialize;
@@ -151,9 +151,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ..base.clone()
         };
         let focal = Some(summary.intrinsics.fx);
-        // The SfM rows run the whole pipeline a user's `gems train --init sfm` runs (with a
-        // first pass and the SfM again on its renders when the configuration asks for it).
-        let sfm_row = |name: &'static str, scene: &Path, out: &Path, cfg: &TrainConfig| {
+        // Every row runs the whole pipeline a user's `gems train --init sfm|gt` runs (for the
+        // SfM, a first pass and the SfM again on its renders when the configuration asks for
+        // it; from ground truth, straight paths first).
+        let row = |name: &'static str, init: Init, scene: &Path, out: &Path, cfg: &TrainConfig| {
             tracing::info!(seed, run = name, "bench-quality run");
             let start = Instant::now();
             let run = gems_pipeline::train_scene(gems_pipeline::TrainRequest {
@@ -161,7 +162,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 output: out.to_path_buf(),
                 init: gems_pipeline::InitRequest {
                     focal_px: focal,
-                    ..gems_pipeline::InitRequest::new(gems_pipeline::Init::Sfm)
+                    ..gems_pipeline::InitRequest::new(init)
                 },
                 cfg: cfg.clone(),
                 open: gems_data::OpenOptions::default(),
@@ -184,8 +185,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         let wants = |k: RowKind| args.rows.contains(&k);
         let gems_sfm = if wants(RowKind::Sfm) {
-            Some(sfm_row(
+            Some(row(
                 "GeMS, built-in SfM",
+                Init::Sfm,
                 &scene,
                 &dir.join("gems_sfm"),
                 &cfg,
@@ -194,14 +196,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None
         };
         let gems_gt = if wants(RowKind::Gt) {
-            Some(train_row(
-                seed,
+            Some(row(
                 "GeMS, ground-truth poses",
+                Init::Gt,
                 &scene,
                 &dir.join("gems_gt"),
-                InitMode::Gt,
                 &cfg,
-                args.device,
             )?)
         } else {
             None
@@ -223,8 +223,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 num_virtual_views: 1,
                 ..cfg.clone()
             };
-            rows.push(sfm_row(
+            rows.push(row(
                 "sharp ceiling (n = 1, sharp frames, SfM)",
+                Init::Sfm,
                 &sharp,
                 &dir.join("ceiling"),
                 &ceiling,
@@ -243,34 +244,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!("{table}");
     println!("written to {}", out.join("quality.md").display());
     Ok(())
-}
-
-/// Trains and evaluates one run, timing both.
-fn train_row(
-    seed: u64,
-    name: &'static str,
-    scene: &Path,
-    out: &Path,
-    mode: InitMode,
-    cfg: &TrainConfig,
-    device: gems_gpu::DeviceChoice,
-) -> anyhow::Result<Row> {
-    tracing::info!(seed, run = name, "bench-quality run");
-    let start = Instant::now();
-    train_and_report(TrainJob {
-        scene,
-        output: out,
-        mode,
-        cfg: cfg.clone(),
-        open: gems_data::OpenOptions::default(),
-        resume: false,
-        evaluate: true,
-        lpips: &[],
-        engine: super::open_engine(device)?,
-        progress: true,
-    })?;
-    let seconds = start.elapsed().as_secs_f64();
-    Ok(Row::from_metrics(seed, name, &read_metrics(out)?, seconds))
 }
 
 fn read_metrics(run: &Path) -> anyhow::Result<MetricsReport> {
