@@ -934,6 +934,10 @@ fn bench_quality_runs_only_the_rows_asked_for() {
     }
     assert!(!out.join("seed3/gems_sfm").exists());
     assert!(out.join("seed3/ceiling/metrics.json").is_file());
+    // The ceiling trains its sharp frames in one pass, whatever the blurry runs do.
+    let saved = std::fs::read_to_string(out.join("seed3/ceiling/config.toml")).unwrap();
+    assert!(saved.contains("sfm_rerun_fraction = 0.0"), "{saved}");
+    assert!(saved.contains("num_virtual_views = 1"), "{saved}");
     let other = dir.path().join("other");
     let bad = gems(&["bench-quality", "-o", s(&other), "--rows", "sfm,sharp"]);
     fails_clearly(&bad, "invalid value 'sharp' for '--rows");
