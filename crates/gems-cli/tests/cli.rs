@@ -829,6 +829,23 @@ fn device_gpu_trains_evaluates_and_renders() {
     }
 }
 
+/// `gems bench-quality -o <out>` on the tiny preset's seed 3 for 3 steps, with `extra` arguments.
+fn tiny_bench(out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "bench-quality",
+        "-o",
+        out.to_str().unwrap(),
+        "--seeds",
+        "3",
+        "--preset",
+        "tiny",
+        "--steps",
+        "3",
+    ];
+    args.extend_from_slice(extra);
+    gems(&args)
+}
+
 /// `gems bench-quality` on one tiny scene with a few steps: the four rows per seed in both
 /// outputs, and a ceiling scene whose images are the sharp frames, without the blurry
 /// exposures' events.
@@ -836,17 +853,7 @@ fn device_gpu_trains_evaluates_and_renders() {
 fn bench_quality_writes_the_four_rows() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bench");
-    ok(&gems(&[
-        "bench-quality",
-        "-o",
-        s(&out),
-        "--seeds",
-        "3",
-        "--preset",
-        "tiny",
-        "--steps",
-        "3",
-    ]));
+    ok(&tiny_bench(&out, &[]));
     let table = std::fs::read_to_string(out.join("quality.md")).unwrap();
     let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| 3 |")).collect();
     assert_eq!(rows.len(), 4, "{table}");
@@ -907,22 +914,7 @@ fn bench_quality_writes_the_four_rows() {
 fn bench_quality_runs_only_the_rows_asked_for() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bench");
-    let args = |rows: &str| {
-        gems(&[
-            "bench-quality",
-            "-o",
-            s(&out),
-            "--seeds",
-            "3",
-            "--preset",
-            "tiny",
-            "--steps",
-            "3",
-            "--rows",
-            rows,
-        ])
-    };
-    ok(&args("ceiling,gt"));
+    ok(&tiny_bench(&out, &["--rows", "ceiling,gt"]));
     let table = std::fs::read_to_string(out.join("quality.md")).unwrap();
     let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| 3 |")).collect();
     assert_eq!(rows.len(), 3, "{table}");

@@ -187,28 +187,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         };
         let wants = |k: RowKind| args.rows.contains(&k);
-        let gems_sfm = if wants(RowKind::Sfm) {
-            Some(row(
-                "GeMS, built-in SfM",
-                Init::Sfm,
-                &scene,
-                &dir.join("gems_sfm"),
-                &cfg,
-            )?)
-        } else {
-            None
-        };
-        let gems_gt = if wants(RowKind::Gt) {
-            Some(row(
-                "GeMS, ground-truth poses",
-                Init::Gt,
-                &scene,
-                &dir.join("gems_gt"),
-                &cfg,
-            )?)
-        } else {
-            None
-        };
+        let gems_sfm = wants(RowKind::Sfm)
+            .then(|| {
+                row(
+                    "GeMS, built-in SfM",
+                    Init::Sfm,
+                    &scene,
+                    &dir.join("gems_sfm"),
+                    &cfg,
+                )
+            })
+            .transpose()?;
+        let gems_gt = wants(RowKind::Gt)
+            .then(|| {
+                row(
+                    "GeMS, ground-truth poses",
+                    Init::Gt,
+                    &scene,
+                    &dir.join("gems_gt"),
+                    &cfg,
+                )
+            })
+            .transpose()?;
         // The blurry input is every blurry run's `input` figure: read it from whichever ran.
         let input = ["gems_sfm", "gems_gt"]
             .iter()
