@@ -9,7 +9,7 @@ mod common;
 #[path = "../../gems-splat/tests/common/mod.rs"]
 mod splat_common;
 
-use common::{ctx, max_abs, max_abs_diff};
+use common::{ctx, max_abs, max_abs_diff, max_rounding_err};
 use gems_gpu::{
     AdamConfig, BlurLoss, GaussianLrs, GpuAdam, GpuGaussians, GpuGradients, GpuRenderer, buffers,
 };
@@ -105,8 +105,8 @@ fn gpu_step_matches_the_cpu_chain() {
     );
 
     // Adam on the resident Gaussians with the GPU gradients, against the CPU Adam with the same
-    // gradients: bit-for-bit the same update (see tests/adam.rs), so any difference is the
-    // gradients'.
+    // gradients: the same update up to the rounding Vulkan allows (see tests/adam.rs), so any
+    // larger difference is the chain's.
     let lrs = GaussianLrs {
         means: 1e-3,
         quats: 1e-3,
@@ -141,6 +141,14 @@ fn gpu_step_matches_the_cpu_chain() {
         0.0,
         hy,
     );
-    assert_eq!(stepped.opacity_logits, cpu_g.opacity_logits);
+    // One step moves a parameter by exactly lr·sign(g) up to rounding: its scale is |p| + lr.
+    let scale: Vec<f32> = g
+        .opacity_logits
+        .iter()
+        .map(|p| p.abs() + lrs.opacity_logits)
+        .collect();
+    let e = max_rounding_err(&stepped.opacity_logits, &cpu_g.opacity_logits, &scale);
+    eprintln!("Adam step of the opacity logits: {e:.2} ε");
+    assert!(e <= 16.0, "{e} ε");
     assert_ne!(stepped.opacity_logits, g.opacity_logits);
 }
