@@ -35,9 +35,11 @@ fn context() -> GpuContext {
 }
 
 /// The engine and the scene resident on it, after one warm-up render (which also settles the
-/// cameras per call).
+/// cameras per call). `subgroups: false` compiles the workgroup-memory backward rasterizer
+/// even where the adapter has subgroups.
 fn resident(
     n: usize,
+    subgroups: bool,
 ) -> (
     GpuContext,
     GpuRenderer,
@@ -46,7 +48,11 @@ fn resident(
     Vec<[f32; 3]>,
 ) {
     let (g, cams, bgs) = scene(n);
-    let ctx = context();
+    let ctx = if subgroups {
+        context()
+    } else {
+        context().without_subgroups()
+    };
     let mut r = GpuRenderer::new(&ctx);
     let mut step = ResidentStep::new(&ctx, &g, None).unwrap();
     let s = RenderSettings::default();
@@ -54,8 +60,10 @@ fn resident(
     step.render(&mut r, &cams, &bgs, &s).unwrap();
     step.backpropagate(&mut r, &cams, &bgs, &d_rgb, &s).unwrap();
     println!(
-        "{n} Gaussians: {} cameras per call; GPU buffers after a forward+backward: {} MiB",
+        "{n} Gaussians: {} cameras per call; subgroup backward: {}; GPU buffers after a \
+         forward+backward: {} MiB",
         step.max_cameras_per_call().min(CAMERAS),
+        ctx.subgroups,
         (r.allocated_bytes() + step.allocated_bytes()) >> 20
     );
     (ctx, r, step, cams, bgs)
@@ -63,7 +71,7 @@ fn resident(
 
 #[divan::bench(args = SIZES, sample_count = 3, sample_size = 1)]
 fn gpu_forward(bencher: Bencher, n: usize) {
-    let (ctx, mut r, mut step, cams, bgs) = resident(n);
+    let (ctx, mut r, mut step, cams, bgs) = resident(n, true);
     let s = RenderSettings::default();
     bencher.bench_local(|| {
         step.render(&mut r, &cams, &bgs, &s).unwrap();
@@ -71,9 +79,20 @@ fn gpu_forward(bencher: Bencher, n: usize) {
     });
 }
 
+/// What training runs: the subgroup backward rasterizer where the adapter has subgroups.
 #[divan::bench(args = SIZES, sample_count = 3, sample_size = 1)]
 fn gpu_forward_backward(bencher: Bencher, n: usize) {
-    let (ctx, mut r, mut step, cams, bgs) = resident(n);
+    gpu_forward_backward_with(bencher, n, true);
+}
+
+/// The workgroup-memory backward rasterizer on the same adapter, for the ratio.
+#[divan::bench(args = SIZES, sample_count = 3, sample_size = 1)]
+fn gpu_forward_backward_workgroup_reduction(bencher: Bencher, n: usize) {
+    gpu_forward_backward_with(bencher, n, false);
+}
+
+fn gpu_forward_backward_with(bencher: Bencher, n: usize, subgroups: bool) {
+    let (ctx, mut r, mut step, cams, bgs) = resident(n, subgroups);
     let s = RenderSettings::default();
     let d_rgb = buffers::upload(&ctx, "dL/dRGB", &vec![1e-3f32; CAMERAS * 400 * 270 * 3]).unwrap();
     bencher.bench_local(|| {

@@ -62,6 +62,11 @@ pub struct GpuContext {
     pub float_atomics: bool,
     /// The device's limits (as requested: the adapter's own).
     pub limits: wgpu::Limits,
+    /// Subgroup operations (`Features::SUBGROUP`) are enabled and every subgroup has at least
+    /// 8 invocations: the backward rasterizer sums each tile entry's gradient with subgroup adds
+    /// (`rasterize_backward_subgroup.wgsl`); otherwise in workgroup memory, three barriers per
+    /// entry (`rasterize_backward.wgsl`).
+    pub subgroups: bool,
 }
 
 impl std::fmt::Debug for GpuContext {
@@ -69,6 +74,7 @@ impl std::fmt::Debug for GpuContext {
         f.debug_struct("GpuContext")
             .field("adapter", &self.adapter)
             .field("float_atomics", &self.float_atomics)
+            .field("subgroups", &self.subgroups)
             .finish_non_exhaustive()
     }
 }
@@ -109,9 +115,15 @@ impl GpuContext {
         let float_atomics = adapter
             .features()
             .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC);
+        // The subgroup kernel parks one sum per subgroup for up to 256 / 8 subgroups.
+        let subgroups =
+            adapter.features().contains(wgpu::Features::SUBGROUP) && info.subgroup_min_size >= 8;
         let mut features = wgpu::Features::empty();
         if float_atomics {
             features |= wgpu::Features::SHADER_FLOAT32_ATOMIC;
+        }
+        if subgroups {
+            features |= wgpu::Features::SUBGROUP;
         }
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
@@ -130,7 +142,18 @@ impl GpuContext {
             adapter: summary,
             float_atomics,
             limits,
+            subgroups,
         })
+    }
+
+    /// The same device with [`GpuContext::subgroups`] off: kernels compiled for it take the
+    /// workgroup-memory paths. For the tests and benchmarks that compare both paths on one
+    /// adapter.
+    pub fn without_subgroups(&self) -> GpuContext {
+        GpuContext {
+            subgroups: false,
+            ..self.clone()
+        }
     }
 }
 

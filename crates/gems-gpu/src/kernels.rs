@@ -8,6 +8,7 @@ use crate::GpuError;
 
 const COMMON: &str = include_str!("../shaders/common.wgsl");
 const PROJECTION: &str = include_str!("../shaders/projection.wgsl");
+const BACKWARD_PIXEL: &str = include_str!("../shaders/rasterize_backward_pixel.wgsl");
 
 /// Invocations per workgroup in every kernel.
 pub(crate) const WG: u32 = 256;
@@ -64,7 +65,9 @@ pub(crate) struct Kernels {
 }
 
 impl Kernels {
-    pub fn new(device: &wgpu::Device) -> Self {
+    /// Compiles every kernel; `subgroups` picks the backward rasterizer that reduces with
+    /// subgroup adds (the device must have `Features::SUBGROUP`, see `GpuContext::subgroups`).
+    pub fn new(device: &wgpu::Device, subgroups: bool) -> Self {
         let make = |name: &str, projection: bool, body: &str, entry: &str| {
             let mut src = String::from(COMMON);
             if projection {
@@ -125,12 +128,27 @@ impl Kernels {
                 include_str!("../shaders/rasterize_forward.wgsl"),
                 "main",
             ),
-            rasterize_backward: make(
-                "rasterize_backward",
-                false,
-                include_str!("../shaders/rasterize_backward.wgsl"),
-                "main",
-            ),
+            rasterize_backward: if subgroups {
+                make(
+                    "rasterize_backward_subgroup",
+                    false,
+                    &format!(
+                        "{BACKWARD_PIXEL}{}",
+                        include_str!("../shaders/rasterize_backward_subgroup.wgsl")
+                    ),
+                    "main",
+                )
+            } else {
+                make(
+                    "rasterize_backward",
+                    false,
+                    &format!(
+                        "{BACKWARD_PIXEL}{}",
+                        include_str!("../shaders/rasterize_backward.wgsl")
+                    ),
+                    "main",
+                )
+            },
             sum_intersections: make(
                 "sum_intersections",
                 false,

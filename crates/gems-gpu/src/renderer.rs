@@ -250,7 +250,7 @@ impl GpuRenderer {
     pub fn new(ctx: &GpuContext) -> Self {
         GpuRenderer {
             ctx: ctx.clone(),
-            kernels: Kernels::new(&ctx.device),
+            kernels: Kernels::new(&ctx.device, ctx.subgroups),
             bufs: Buffers::new(),
             saved: Saved::default(),
             bytes_read: 0,

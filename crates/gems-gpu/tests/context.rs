@@ -21,7 +21,12 @@ fn gpu_choice_opens_an_adapter_and_auto_skips_software_ones() {
     let ctx = select(DeviceChoice::Gpu)
         .expect("--device gpu needs an adapter: install mesa-vulkan-drivers for lavapipe")
         .expect("gpu gives a context");
-    eprintln!("adapter: {}", ctx.adapter);
+    eprintln!("adapter: {} (subgroups: {})", ctx.adapter, ctx.subgroups);
+    // Mesa's lavapipe has had subgroup arithmetic (8 wide) since before Debian 12's 22.3: CI
+    // must exercise the subgroup backward rasterizer, not only the fallback.
+    if ctx.adapter.name.starts_with("llvmpipe") {
+        assert!(ctx.subgroups, "lavapipe without subgroups: {}", ctx.adapter);
+    }
     if ctx.adapter.is_software {
         // Only software adapters here (CI): auto must fall back to the CPU.
         match select(DeviceChoice::Auto).unwrap() {

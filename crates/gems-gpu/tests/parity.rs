@@ -8,18 +8,37 @@
 mod common;
 
 use common::*;
-use gems_gpu::{DeviceChoice, GpuRenderer, select};
+use gems_gpu::{DeviceChoice, GpuContext, GpuRenderer, select};
 use gems_splat::{Camera, Gaussians, Gradients, RenderOutput, RenderSettings, Renderer, SH_COEFFS};
 
-fn gpu() -> GpuRenderer {
+fn context() -> GpuContext {
     let ctx = select(DeviceChoice::Gpu)
         .expect(
             "no GPU adapter: install a Vulkan driver (Debian/Ubuntu: apt-get install \
              mesa-vulkan-drivers libvulkan1) and run with WGPU_BACKEND=vulkan",
         )
         .expect("--device gpu gives a context");
-    eprintln!("adapter: {}", ctx.adapter);
-    GpuRenderer::new(&ctx)
+    eprintln!("adapter: {} (subgroups: {})", ctx.adapter, ctx.subgroups);
+    ctx
+}
+
+/// The renderer as training gets it: the subgroup backward where the adapter has subgroups.
+fn gpu() -> GpuRenderer {
+    GpuRenderer::new(&context())
+}
+
+/// Both backward rasterizers the adapter can run: the workgroup-memory one, and the subgroup
+/// one where it has subgroups.
+fn both_backwards() -> Vec<(&'static str, GpuRenderer)> {
+    let ctx = context();
+    let mut all = vec![(
+        "workgroup reduction",
+        GpuRenderer::new(&ctx.without_subgroups()),
+    )];
+    if ctx.subgroups {
+        all.push(("subgroup reduction", GpuRenderer::new(&ctx)));
+    }
+    all
 }
 
 fn f64v(v: &[f32]) -> Vec<f64> {
@@ -124,9 +143,15 @@ fn compare_engines(
 
 #[test]
 fn matches_gsplat_vectors_and_cpu_engine() {
-    let mut r = gpu();
-    for name in ["tiny", "basic", "dense", "culling"] {
-        let case = Case::load(name);
+    for (path, mut r) in both_backwards() {
+        gsplat_vectors_match(path, &mut r);
+    }
+}
+
+fn gsplat_vectors_match(path: &str, r: &mut GpuRenderer) {
+    for case_name in ["tiny", "basic", "dense", "culling"] {
+        let case = Case::load(case_name);
+        let name = &format!("{path}, {case_name}");
         let (g, cams, bgs) = (case.gaussians(), case.cameras(), case.backgrounds());
         let s = RenderSettings::default();
         let out = r.forward(&g, &cams, &bgs, &s).unwrap();
@@ -194,7 +219,12 @@ fn matches_gsplat_vectors_and_cpu_engine() {
 
 #[test]
 fn matches_cpu_engine_on_random_scenes() {
-    let mut r = gpu();
+    for (path, mut r) in both_backwards() {
+        random_scenes_match(path, &mut r);
+    }
+}
+
+fn random_scenes_match(path: &str, r: &mut GpuRenderer) {
     // 70×45 is not a multiple of the 16-pixel tile in either direction.
     for (seed, degree, antialiased, depth) in [
         (5u64, 3, false, true),
@@ -208,8 +238,15 @@ fn matches_cpu_engine_on_random_scenes() {
             compute_depth: depth,
             ..Default::default()
         };
-        let (out, grads) =
-            compare_engines(&format!("seed {seed}"), &mut r, &g, &cams, &bgs, &s, seed);
+        let (out, grads) = compare_engines(
+            &format!("{path}, seed {seed}"),
+            r,
+            &g,
+            &cams,
+            &bgs,
+            &s,
+            seed,
+        );
         assert!(
             out.alpha.iter().any(|&a| a > 0.5),
             "seed {seed}: scene draws nothing"
@@ -426,4 +463,41 @@ fn image_batches_stay_on_the_gpu_with_the_same_results() {
         .backward_images(&g, &cams, &bgs, &wrong, None)
         .unwrap_err();
     assert!(err.to_string().contains("dL/dRGB holds 1 images"), "{err}");
+}
+
+/// The two backward rasterizers sum each tile entry's gradient over the tile's pixels in
+/// different orders: on a scene with many overlapping splats per tile both match the CPU
+/// engine and each other within the parity tolerance, differ in their last bits (so both ran),
+/// and the subgroup one gives the same bits on a second run.
+#[test]
+fn subgroup_and_workgroup_reductions_agree() {
+    let mut both = both_backwards();
+    if both.len() < 2 {
+        eprintln!("this adapter has no subgroups: only the workgroup reduction runs here");
+        return;
+    }
+    let (g, cams, bgs) = random_scene(71, 3000, 4, 96, 80, 3, (-3.0, -1.6));
+    let s = RenderSettings::default();
+    let w = f32v(&random_weights(72, 4 * 96 * 80 * 3));
+    let run = |r: &mut GpuRenderer| {
+        r.forward(&g, &cams, &bgs, &s).unwrap();
+        r.backward(&g, &cams, &bgs, &w, None).unwrap()
+    };
+    let wg = run(&mut both[0].1);
+    let sg = run(&mut both[1].1);
+    assert!(
+        run(&mut both[1].1) == sg,
+        "subgroup reduction not reproducible"
+    );
+    let cpu = {
+        let mut cpu = Renderer::new();
+        cpu.forward(&g, &cams, &bgs, &s).unwrap();
+        cpu.backward(&g, &cams, &bgs, &w, None).unwrap()
+    };
+    assert_grads_match("subgroup vs CPU", &sg, &cpu);
+    assert_grads_match("subgroup vs workgroup", &sg, &wg);
+    assert!(
+        sg != wg,
+        "the two reductions gave the same bits: was the subgroup path compiled?"
+    );
 }

@@ -6,10 +6,10 @@
 //! `step_…` runs the CPU engine; `gpu_step_…` the same trainer on the GPU engine (any adapter,
 //! lavapipe included: `WGPU_BACKEND=vulkan`), whose step is resident (gems-gpu
 //! `ResidentStep`); its first step, which uploads the Gaussians and the image, is outside the
-//! timed window.
+//! timed window. `…_workgroup_reduction` forces the backward rasterizer without subgroups.
 
 use gems_gpu::DeviceChoice;
-use gems_gpu::Engine;
+use gems_gpu::{Engine, GpuRenderer};
 use gems_math::Intrinsics;
 use gems_math::{Se3, Vector6};
 use gems_splat::{Camera, Gaussians, RenderSettings, Renderer};
@@ -115,8 +115,23 @@ fn step_400x270_100k_n15(bencher: divan::Bencher) {
 
 #[divan::bench(sample_count = 3, sample_size = 1)]
 fn gpu_step_400x270_100k_n15(bencher: divan::Bencher) {
-    let mut t = trainer();
     let engine = Engine::select(DeviceChoice::Gpu).expect("a GPU adapter");
+    gpu_step(bencher, engine);
+}
+
+/// The GPU step with the workgroup-memory backward rasterizer even where the adapter has
+/// subgroups (gems-gpu `GpuContext::without_subgroups`), for the ratio.
+#[divan::bench(sample_count = 3, sample_size = 1)]
+fn gpu_step_400x270_100k_n15_workgroup_reduction(bencher: divan::Bencher) {
+    let ctx = gems_gpu::select(DeviceChoice::Gpu)
+        .expect("a GPU adapter")
+        .expect("a context");
+    let engine = Engine::Gpu(Box::new(GpuRenderer::new(&ctx.without_subgroups())));
+    gpu_step(bencher, engine);
+}
+
+fn gpu_step(bencher: divan::Bencher, engine: Engine) {
+    let mut t = trainer();
     println!("{}", engine.describe());
     t.set_engine(engine);
     t.step().unwrap();
