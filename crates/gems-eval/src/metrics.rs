@@ -3,11 +3,11 @@
 use gems_gpu::Engine;
 use gems_math::{Alignment, Intrinsics, Matrix3, Se3, So3, ape_translation, error_stats};
 use gems_metrics::Lpips;
-use gems_splat::{Camera, Gaussians, RenderSettings};
+use gems_splat::Gaussians;
 use serde::{Deserialize, Serialize};
 
 use crate::EvalError;
-use crate::refine::{PoseRefineConfig, refine_pose};
+use crate::refine::{PoseRefineConfig, refine_pose, render};
 
 /// JSON has no infinity: serde_json writes the PSNR of a perfect render as `null`; read it back
 /// as +∞.
@@ -200,6 +200,7 @@ pub fn evaluate_views_with_progress(
     let mut per_image = Vec::with_capacity(views.len());
     let mut renders = Vec::with_capacity(views.len());
     let mut poses = Vec::with_capacity(views.len());
+    let mut scene = renderer.freeze(gaussians)?;
     for (i, v) in views.iter().enumerate() {
         tracing::info!(view = %v.name, "evaluating view {}/{}", i + 1, views.len());
         let k = &v.intrinsics;
@@ -214,15 +215,12 @@ pub fn evaluate_views_with_progress(
         let pose = match mode {
             PoseMode::AsGiven => v.c2w_eval,
             PoseMode::Refine(cfg) => {
-                let r = refine_pose(renderer, gaussians, &v.c2w_init, k, &v.gt, &cfg)?;
+                let r = refine_pose(&mut scene, &v.c2w_init, k, &v.gt, &cfg)?;
                 tracing::debug!(view = %v.name, l1_before = r.l1_before, l1_after = r.l1_after, "pose refined");
                 r.c2w
             }
         };
-        let cam = Camera::from_c2w(k, &pose);
-        let rgb = renderer
-            .forward(gaussians, &[cam], &[[0.0; 3]], &RenderSettings::default())?
-            .rgb;
+        let rgb = render(&mut scene, &pose, k)?;
         per_image.push(score_image(&v.name, &rgb, &v.gt, h, w, lpips)?);
         renders.push(rgb);
         poses.push(pose);

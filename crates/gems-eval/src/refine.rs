@@ -9,9 +9,9 @@
 //! one after the last update (PRISM3D logs its metrics at step 80 of 100, an artefact of its
 //! logging interval that we do not copy).
 
-use gems_gpu::Engine;
+use gems_gpu::FrozenScene;
 use gems_math::{Intrinsics, Se3, Vector6, c2w_right_perturbation_gradient, se3_right_jacobian};
-use gems_splat::{Camera, Gaussians, RenderSettings};
+use gems_splat::{Camera, RenderSettings};
 
 use crate::EvalError;
 
@@ -70,8 +70,7 @@ fn clamped_l1(render: &[f32], gt: &[f32], d_rgb: &mut [f32]) -> f64 {
 
 /// The L1 loss at c2w_init · Exp(δ) and its gradient w.r.t. δ.
 pub fn pose_loss_and_grad(
-    renderer: &mut Engine,
-    gaussians: &Gaussians,
+    scene: &mut FrozenScene,
     c2w_init: &Se3,
     k: &Intrinsics,
     gt: &[f32],
@@ -89,14 +88,13 @@ pub fn pose_loss_and_grad(
     let xi = Vector6::from(*delta);
     let c2w = *c2w_init * Se3::exp(&xi);
     let cam = Camera::from_c2w(k, &c2w);
-    let bg = [[0.0f32; 3]];
-    let out = renderer.forward(gaussians, &[cam], &bg, &RenderSettings::default())?;
+    let rgb = scene.render(&cam, [0.0; 3], &RenderSettings::default())?;
     let mut d_rgb = vec![0.0f32; n];
-    let loss = clamped_l1(&out.rgb, gt, &mut d_rgb);
-    let grads = renderer.backward(gaussians, &[cam], &bg, &d_rgb, None)?;
+    let loss = clamped_l1(&rgb, gt, &mut d_rgb);
+    let (d_r, d_t) = scene.pose_gradient(&cam, [0.0; 3], &d_rgb)?;
     let w2c = c2w.inverse();
-    let gr = grads.cam_rotation[0].map(|row| row.map(f64::from));
-    let gt_ = grads.cam_translation[0].map(f64::from);
+    let gr = d_r.map(|row| row.map(f64::from));
+    let gt_ = d_t.map(f64::from);
     // Gradient w.r.t. the right perturbation of the current c2w, then through Exp: the current
     // pose moves by Exp(𝒥_r(δ) dδ) when δ moves by dδ.
     let g = Vector6::from(c2w_right_perturbation_gradient(&w2c, &gr, &gt_));
@@ -106,8 +104,7 @@ pub fn pose_loss_and_grad(
 
 /// Fits the SE(3) correction of one view; see the module docs.
 pub fn refine_pose(
-    renderer: &mut Engine,
-    gaussians: &Gaussians,
+    scene: &mut FrozenScene,
     c2w_init: &Se3,
     k: &Intrinsics,
     gt: &[f32],
@@ -117,7 +114,7 @@ pub fn refine_pose(
     let (mut m, mut v) = ([0.0f64; 6], [0.0f64; 6]);
     let mut l1_before = f64::NAN;
     for step in 1..=cfg.steps {
-        let (loss, g) = pose_loss_and_grad(renderer, gaussians, c2w_init, k, gt, &delta)?;
+        let (loss, g) = pose_loss_and_grad(scene, c2w_init, k, gt, &delta)?;
         if step == 1 {
             l1_before = loss;
         }
@@ -130,7 +127,7 @@ pub fn refine_pose(
             delta[i] -= cfg.lr * (m[i] / bc1) / ((v[i] / bc2).sqrt() + cfg.eps);
         }
     }
-    let (l1_after, _) = pose_loss_and_grad(renderer, gaussians, c2w_init, k, gt, &delta)?;
+    let (l1_after, _) = pose_loss_and_grad(scene, c2w_init, k, gt, &delta)?;
     if cfg.steps == 0 {
         l1_before = l1_after;
     }
@@ -143,14 +140,7 @@ pub fn refine_pose(
 }
 
 /// Renders `c2w` on a black background (the evaluation render).
-pub fn render(
-    renderer: &mut Engine,
-    gaussians: &Gaussians,
-    c2w: &Se3,
-    k: &Intrinsics,
-) -> Result<Vec<f32>, EvalError> {
+pub fn render(scene: &mut FrozenScene, c2w: &Se3, k: &Intrinsics) -> Result<Vec<f32>, EvalError> {
     let cam = Camera::from_c2w(k, c2w);
-    Ok(renderer
-        .forward(gaussians, &[cam], &[[0.0; 3]], &RenderSettings::default())?
-        .rgb)
+    Ok(scene.render(&cam, [0.0; 3], &RenderSettings::default())?)
 }

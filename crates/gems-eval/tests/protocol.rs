@@ -13,7 +13,8 @@ use gems_train::{TrainOutput, ViewResult};
 fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
     let g = common::scene(60, -2.6, 0.5);
     let k = common::intrinsics();
-    let mut r = gems_gpu::Engine::cpu();
+    let mut engine = gems_gpu::Engine::cpu();
+    let mut r = engine.freeze(&g).unwrap();
     let mut views = Vec::new();
     let mut data = EvalData::default();
     for i in 0..5 {
@@ -33,7 +34,7 @@ fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
             virtual_c2w: virt.iter().map(Pose::from).collect(),
             mid_c2w: Pose::from(&mid),
         });
-        let gt = refine::render(&mut r, &g, &truth, &k).unwrap();
+        let gt = refine::render(&mut r, &truth, &k).unwrap();
         data.train_blurry
             .push(Some(gt.iter().map(|v| v * 0.8).collect()));
         data.train_gt.push(Some(gt));
@@ -44,9 +45,10 @@ fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
             name: format!("novel{i}"),
             intrinsics: k,
             c2w_init: common::perturb(&truth, [0.02, -0.01, 0.015, 0.008, -0.006, 0.004]),
-            gt: refine::render(&mut r, &g, &truth, &k).unwrap(),
+            gt: refine::render(&mut r, &truth, &k).unwrap(),
         });
     }
+    drop(r);
     let out = TrainOutput {
         config: gems_train::TrainConfig::default(),
         normalization: Normalization::identity(),

@@ -11,14 +11,15 @@ use gems_gpu::Engine;
 fn pose_gradient_matches_finite_differences() {
     let g = common::scene(60, -2.6, 0.5);
     let k = common::intrinsics();
-    let mut r = Engine::cpu();
-    let gt = render(&mut r, &g, &common::camera(0.0), &k).unwrap();
+    let mut engine = Engine::cpu();
+    let mut r = engine.freeze(&g).unwrap();
+    let gt = render(&mut r, &common::camera(0.0), &k).unwrap();
     let start = common::perturb(
         &common::camera(0.0),
         [0.05, -0.04, 0.03, 0.02, -0.015, 0.01],
     );
     let delta = [0.01, 0.02, -0.01, 0.005, 0.004, -0.006];
-    let (_, grad) = pose_loss_and_grad(&mut r, &g, &start, &k, &gt, &delta).unwrap();
+    let (_, grad) = pose_loss_and_grad(&mut r, &start, &k, &gt, &delta).unwrap();
     let h = 1e-4;
     let gmax = grad.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     assert!(gmax > 1e-4, "gradient should not vanish: {grad:?}");
@@ -26,9 +27,7 @@ fn pose_gradient_matches_finite_differences() {
         let mut at = |s: f64| {
             let mut d = delta;
             d[c] += s;
-            pose_loss_and_grad(&mut r, &g, &start, &k, &gt, &d)
-                .unwrap()
-                .0
+            pose_loss_and_grad(&mut r, &start, &k, &gt, &d).unwrap().0
         };
         let fd = (at(h) - at(-h)) / (2.0 * h);
         // The analytic gradient is gsplat's (it ignores the jumps where a Gaussian crosses
@@ -45,12 +44,13 @@ fn pose_gradient_matches_finite_differences() {
 fn refinement_recovers_a_perturbed_pose() {
     let g = common::scene(60, -2.6, 0.5);
     let k = common::intrinsics();
-    let mut r = Engine::cpu();
+    let mut engine = Engine::cpu();
+    let mut r = engine.freeze(&g).unwrap();
     let truth = common::camera(0.3);
-    let gt = render(&mut r, &g, &truth, &k).unwrap();
+    let gt = render(&mut r, &truth, &k).unwrap();
     let start = common::perturb(&truth, [0.03, -0.02, 0.02, 0.01, -0.012, 0.008]);
     let before = common::reprojection_error(&g, &k, &start, &truth);
-    let out = refine_pose(&mut r, &g, &start, &k, &gt, &PoseRefineConfig::default()).unwrap();
+    let out = refine_pose(&mut r, &start, &k, &gt, &PoseRefineConfig::default()).unwrap();
     let after = common::reprojection_error(&g, &k, &out.c2w, &truth);
     assert!(
         out.l1_after < 0.1 * out.l1_before,
@@ -65,7 +65,6 @@ fn refinement_recovers_a_perturbed_pose() {
     // Zero steps: the initial pose, unchanged.
     let none = refine_pose(
         &mut r,
-        &g,
         &start,
         &k,
         &gt,

@@ -6,11 +6,15 @@
 //! two engines differ by float rounding only; each engine alone is deterministic (the GPU one
 //! on a given adapter and driver: it adds no floats atomically). With the GPU engine the
 //! trainer (gems-train) keeps the training step resident on the GPU ([`crate::ResidentStep`]);
-//! the calls here serve evaluation and the CPU engine's training step.
+//! the calls here serve evaluation and the CPU engine's training step. Evaluation renders one
+//! frozen scene from many single cameras and takes their pose gradients ([`FrozenScene`]).
 
 use gems_splat::{Camera, Gaussians, Gradients, RenderOutput, RenderSettings, Renderer};
 
-use crate::{DeviceChoice, GpuError, GpuRenderer};
+use crate::{
+    CameraChunk, DeviceChoice, GpuError, GpuGaussians, GpuGradients, GpuRenderer, ImageBatch,
+    buffers,
+};
 
 /// A splatting engine (both boxed: the CPU engine's buffers are kept inline).
 pub enum Engine {
@@ -80,5 +84,128 @@ impl Engine {
             Engine::Cpu(r) => r.backward(g, cams, bgs, d_rgb, d_alpha)?,
             Engine::Gpu(r) => r.backward(g, cams, bgs, d_rgb, d_alpha)?,
         })
+    }
+
+    /// Freezes `g` for [`FrozenScene`]'s single-camera renders and pose gradients. The GPU
+    /// engine uploads the Gaussians here, once.
+    pub fn freeze<'e>(&'e mut self, g: &'e Gaussians) -> Result<FrozenScene<'e>, GpuError> {
+        let resident = match self {
+            Engine::Cpu(_) => None,
+            Engine::Gpu(r) => {
+                let ctx = r.context();
+                Some(ResidentScene {
+                    gaussians: GpuGaussians::upload(ctx, g, g.len())?,
+                    grads: GpuGradients::new(ctx, g.len())?,
+                    d_rgb: None,
+                })
+            }
+        };
+        Ok(FrozenScene {
+            engine: self,
+            gaussians: g,
+            resident,
+        })
+    }
+}
+
+/// Gaussians held fixed while single cameras are rendered and their pose gradients taken: the
+/// evaluation's test-time pose refinement (100 render + pose-gradient steps per view) and its
+/// renders. On the GPU the Gaussians stay resident: per render only the camera goes up and the
+/// image comes back, per pose gradient dL/dRGB goes up and 12 floats come back, where
+/// [`Engine::forward`] and [`Engine::backward`] upload every Gaussian twice and read every
+/// Gaussian's gradient back. Same results as those calls up to float rounding (the CPU engine
+/// runs exactly them).
+pub struct FrozenScene<'e> {
+    engine: &'e mut Engine,
+    gaussians: &'e Gaussians,
+    resident: Option<ResidentScene>,
+}
+
+/// The GPU side of a [`FrozenScene`].
+struct ResidentScene {
+    gaussians: GpuGaussians,
+    /// Where the backward writes the Gaussian gradients (never read back).
+    grads: GpuGradients,
+    /// dL/dRGB of the last pose gradient, grown to the largest image.
+    d_rgb: Option<wgpu::Buffer>,
+}
+
+impl FrozenScene<'_> {
+    /// The frozen Gaussians.
+    pub fn gaussians(&self) -> &Gaussians {
+        self.gaussians
+    }
+
+    /// Renders one camera over `background`: RGB `[H,W,3]`, unclamped.
+    pub fn render(
+        &mut self,
+        cam: &Camera,
+        background: [f32; 3],
+        s: &RenderSettings,
+    ) -> Result<Vec<f32>, GpuError> {
+        match (&mut *self.engine, &mut self.resident) {
+            (Engine::Gpu(r), Some(res)) => {
+                let batch = r.forward_resident(&res.gaussians, &[*cam], &[background], s)?;
+                let len = batch.width as usize * batch.height as usize * 3;
+                buffers::download(r.context(), &batch.buffer, 0, len)
+            }
+            (engine, _) => Ok(engine
+                .forward(self.gaussians, &[*cam], &[background], s)?
+                .rgb),
+        }
+    }
+
+    /// dL/dR (row-major) and dL/dt of the world-to-camera pose of the last
+    /// [`FrozenScene::render`] (same camera and background) for `d_rgb` = dL/dRGB `[H,W,3]`.
+    pub fn pose_gradient(
+        &mut self,
+        cam: &Camera,
+        background: [f32; 3],
+        d_rgb: &[f32],
+    ) -> Result<([[f32; 3]; 3], [f32; 3]), GpuError> {
+        match (&mut *self.engine, &mut self.resident) {
+            (Engine::Gpu(r), Some(res)) => {
+                let len = cam.width as usize * cam.height as usize * 3;
+                if d_rgb.len() != len {
+                    return Err(GpuError::Shape(format!(
+                        "dL/dRGB has {} values, the camera is {}x{}x3",
+                        d_rgb.len(),
+                        cam.width,
+                        cam.height
+                    )));
+                }
+                let ctx = r.context().clone();
+                let bytes = (len * 4) as u64;
+                if res.d_rgb.as_ref().is_none_or(|b| b.size() < bytes) {
+                    res.d_rgb = Some(buffers::storage_buffer(&ctx, "dL/dRGB", len)?);
+                }
+                let buffer = res.d_rgb.clone().expect("allocated above");
+                ctx.queue
+                    .write_buffer(&buffer, 0, bytemuck::cast_slice(d_rgb));
+                let batch = ImageBatch {
+                    buffer,
+                    count: 1,
+                    width: cam.width,
+                    height: cam.height,
+                };
+                r.backward_resident(
+                    &res.gaussians,
+                    &[*cam],
+                    &[background],
+                    &batch,
+                    &res.grads,
+                    CameraChunk::WHOLE,
+                )?;
+                let p: Vec<f32> = buffers::download(&ctx, r.pose_gradients()?, 0, 12)?;
+                Ok((
+                    [[p[0], p[1], p[2]], [p[3], p[4], p[5]], [p[6], p[7], p[8]]],
+                    [p[9], p[10], p[11]],
+                ))
+            }
+            (engine, _) => {
+                let g = engine.backward(self.gaussians, &[*cam], &[background], d_rgb, None)?;
+                Ok((g.cam_rotation[0], g.cam_translation[0]))
+            }
+        }
     }
 }

@@ -65,7 +65,7 @@ mod step;
 
 pub use adam::{AdamConfig, AdamGroupStep, GaussianLrs, GpuAdam};
 pub use context::{AdapterSummary, DeviceChoice, GpuContext, select};
-pub use engine::Engine;
+pub use engine::{Engine, FrozenScene};
 pub use loss::{BlurLoss, LossScalars};
 pub use mcmc::{GpuMcmc, N_MAX, NoiseParams};
 pub use params::{GpuGaussians, GpuGradients, Group, GroupMoments};
