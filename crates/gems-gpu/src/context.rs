@@ -57,9 +57,6 @@ pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub adapter: AdapterSummary,
-    /// `SHADER_FLOAT32_ATOMIC` is enabled: kernels may use `atomic<f32>` adds; otherwise they
-    /// fall back to a compare-and-swap loop on `atomic<u32>`.
-    pub float_atomics: bool,
     /// The device's limits (as requested: the adapter's own).
     pub limits: wgpu::Limits,
     /// Subgroup operations (`Features::SUBGROUP`) are enabled and every subgroup has at least
@@ -73,7 +70,6 @@ impl std::fmt::Debug for GpuContext {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("GpuContext")
             .field("adapter", &self.adapter)
-            .field("float_atomics", &self.float_atomics)
             .field("subgroups", &self.subgroups)
             .finish_non_exhaustive()
     }
@@ -112,16 +108,10 @@ impl GpuContext {
                 "only a software adapter was found: {summary}"
             )));
         }
-        let float_atomics = adapter
-            .features()
-            .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC);
         // The subgroup kernel parks one sum per subgroup for up to 256 / 8 subgroups.
         let subgroups =
             adapter.features().contains(wgpu::Features::SUBGROUP) && info.subgroup_min_size >= 8;
         let mut features = wgpu::Features::empty();
-        if float_atomics {
-            features |= wgpu::Features::SHADER_FLOAT32_ATOMIC;
-        }
         if subgroups {
             features |= wgpu::Features::SUBGROUP;
         }
@@ -140,7 +130,6 @@ impl GpuContext {
             device,
             queue,
             adapter: summary,
-            float_atomics,
             limits,
             subgroups,
         })
