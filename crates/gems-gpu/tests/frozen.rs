@@ -56,3 +56,20 @@ fn resident_renders_and_pose_gradients_match_the_cpu_engine() {
         .unwrap_err();
     assert!(err.to_string().contains("dL/dRGB"), "{err}");
 }
+
+#[test]
+fn an_empty_scene_renders_the_background_and_no_pose_gradient() {
+    let mut gpu = Engine::select(DeviceChoice::Gpu)
+        .expect("no GPU adapter: install mesa-vulkan-drivers and run with WGPU_BACKEND=vulkan");
+    let (g, cams, _) = random_scene(32, 0, 1, 40, 30, 3, (-3.2, -1.8));
+    let mut frozen = gpu.freeze(&g).unwrap();
+    let rgb = frozen
+        .render(&cams[0], [0.25, 0.5, 0.75], &RenderSettings::default())
+        .unwrap();
+    assert_eq!(rgb.len(), 40 * 30 * 3);
+    assert!(rgb.chunks_exact(3).all(|p| p == [0.25, 0.5, 0.75]));
+    let (d_r, d_t) = frozen
+        .pose_gradient(&cams[0], [0.25, 0.5, 0.75], &vec![1.0; rgb.len()])
+        .unwrap();
+    assert_eq!((d_r, d_t), ([[0.0; 3]; 3], [0.0; 3]));
+}
