@@ -5,11 +5,8 @@
 // reproducible results. Three barriers per entry: the path for adapters without subgroup
 // operations (rasterize_backward_subgroup.wgsl is the fast one).
 
-var<workgroup> batch: array<Splat, BATCH>;
 var<workgroup> red: array<array<f32, 256>, SG>;
 var<workgroup> rows: array<array<f32, 16>, SG>;
-var<workgroup> max_last: atomic<u32>;
-var<workgroup> max_last_copy: u32;
 
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -20,26 +17,12 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         return;
     }
     let tp = tile_pixel(params, gt, lid);
-    if lid == 0u {
-        atomicStore(&max_last, 0u);
-    }
-    workgroupBarrier();
     var replay = pixel_replay(tp);
-    atomicMax(&max_last, replay.last);
-    workgroupBarrier();
-    if lid == 0u {
-        max_last_copy = atomicLoad(&max_last);
-    }
-    let used = workgroupUniformLoad(&max_last_copy);
     let range = ranges[gt];
-    var end = used;
+    var end = entries_used(replay.last, lid);
     while end > 0u {
         let start = max(end, BATCH) - BATCH;
-        workgroupBarrier();
-        if lid < end - start {
-            batch[lid] = splats[sorted_splat[range.x + start + lid]];
-        }
-        workgroupBarrier();
+        stage_batch(range.x, start, end, lid);
         for (var j = end; j > start; j--) {
             let g = replay_entry(&replay, tp, j - 1u, batch[j - 1u - start]);
             for (var q = 0u; q < SG; q++) {

@@ -1,8 +1,8 @@
 // Shared by the two backward rasterizers (rasterize_backward.wgsl, which sums each tile entry's
 // gradient over the tile's pixels in workgroup memory, and rasterize_backward_subgroup.wgsl,
-// which sums it with subgroup adds): the bindings, and one pixel's replay of its tile list back
-// to front, restoring its transmittance and the colour behind it exactly as the forward
-// composited them.
+// which sums it with subgroup adds): the bindings, the staging of the tile list in batches from
+// the last entry any pixel used, and one pixel's replay of that list back to front, restoring
+// its transmittance and the colour behind it exactly as the forward composited them.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> splats: array<Splat>;
@@ -16,6 +16,34 @@
 
 // Splats staged in workgroup memory per batch.
 const BATCH: u32 = 64u;
+var<workgroup> batch: array<Splat, BATCH>;
+var<workgroup> max_last: atomic<u32>;
+var<workgroup> max_last_copy: u32;
+
+// How many entries of the tile list any pixel of the workgroup composited (`last` is this
+// invocation's): the replay starts there. Workgroup-uniform.
+fn entries_used(last: u32, lid: u32) -> u32 {
+    if lid == 0u {
+        atomicStore(&max_last, 0u);
+    }
+    workgroupBarrier();
+    atomicMax(&max_last, last);
+    workgroupBarrier();
+    if lid == 0u {
+        max_last_copy = atomicLoad(&max_last);
+    }
+    return workgroupUniformLoad(&max_last_copy);
+}
+
+// Stages the splats of tile-list entries start..end (list offset `first`) in `batch`, once
+// every invocation is done with the previous batch.
+fn stage_batch(first: u32, start: u32, end: u32, lid: u32) {
+    workgroupBarrier();
+    if lid < end - start {
+        batch[lid] = splats[sorted_splat[first + start + lid]];
+    }
+    workgroupBarrier();
+}
 
 struct PixelReplay {
     // dL/dRGB of the pixel.

@@ -17,11 +17,8 @@ const FLUSH: u32 = 8u;
 // Subgroups per workgroup of 256 with the smallest subgroup this kernel accepts (8).
 const MAX_SUBGROUPS: u32 = 32u;
 
-var<workgroup> batch: array<Splat, BATCH>;
 // [entry of the flush group][gradient component][subgroup]: 8·9·32·4 = 9216 bytes.
 var<workgroup> parked: array<f32, 2304>;
-var<workgroup> max_last: atomic<u32>;
-var<workgroup> max_last_copy: u32;
 
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -35,26 +32,12 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         return;
     }
     let tp = tile_pixel(params, gt, lid);
-    if lid == 0u {
-        atomicStore(&max_last, 0u);
-    }
-    workgroupBarrier();
     var replay = pixel_replay(tp);
-    atomicMax(&max_last, replay.last);
-    workgroupBarrier();
-    if lid == 0u {
-        max_last_copy = atomicLoad(&max_last);
-    }
-    let used = workgroupUniformLoad(&max_last_copy);
     let range = ranges[gt];
-    var end = used;
+    var end = entries_used(replay.last, lid);
     while end > 0u {
         let start = max(end, BATCH) - BATCH;
-        workgroupBarrier();
-        if lid < end - start {
-            batch[lid] = splats[sorted_splat[range.x + start + lid]];
-        }
-        workgroupBarrier();
+        stage_batch(range.x, start, end, lid);
         // Entries parked so far in this flush group: slot k holds entry j - 1 + pending - 1 - k
         // once entry j - 1 is parked (the replay goes back to front).
         var pending = 0u;
