@@ -4,6 +4,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::MathError;
+use crate::{Se3, So3};
 
 /// A similarity transform p ↦ s·R·p + t.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -77,6 +78,38 @@ pub fn umeyama(src: &[[f64; 3]], dst: &[[f64; 3]], with_scale: bool) -> Result<S
     };
     let trans = my - rot * mx * scale;
     Ok(Sim3 { scale, rot, trans })
+}
+
+/// The similarity taking one set of cameras onto another, from pairs of camera-to-world poses
+/// of the same cameras (`(in A, in B)`): its rotation the chordal mean of the rotations'
+/// differences R_B R_Aᵀ, its scale and translation by least squares on the camera centres under
+/// that rotation. Unlike a centre-only Umeyama it needs no spread of centres across two
+/// directions: a straight camera path leaves the rotation about it undetermined, the cameras'
+/// orientations do not. `None` with fewer than two pairs or coincident centres.
+pub fn camera_similarity(pairs: &[(Se3, Se3)]) -> Option<Sim3> {
+    if pairs.len() < 2 {
+        return None;
+    }
+    let sum = pairs.iter().fold(Matrix3::zeros(), |acc, (a, b)| {
+        acc + b.rot * a.rot.transpose()
+    });
+    let rot = *So3::from_matrix_orthonormalized(&sum).matrix();
+    let n = pairs.len() as f64;
+    let mean_a = pairs.iter().map(|(a, _)| a.trans).sum::<Vector3<f64>>() / n;
+    let mean_b = pairs.iter().map(|(_, b)| b.trans).sum::<Vector3<f64>>() / n;
+    let (num, den) = pairs.iter().fold((0.0, 0.0), |(num, den), (a, b)| {
+        let x = rot * (a.trans - mean_a);
+        (num + (b.trans - mean_b).dot(&x), den + x.norm_squared())
+    });
+    if den <= f64::EPSILON {
+        return None;
+    }
+    let scale = num / den;
+    Some(Sim3 {
+        scale,
+        rot,
+        trans: mean_b - scale * (rot * mean_a),
+    })
 }
 
 /// Error statistics with evo's definitions (population std, numpy median).

@@ -28,7 +28,9 @@ pub mod se3;
 pub mod so3;
 pub mod trajectory;
 
-pub use align::{Alignment, ApeStats, Sim3, ape_translation, error_stats, umeyama};
+pub use align::{
+    Alignment, ApeStats, Sim3, ape_translation, camera_similarity, error_stats, umeyama,
+};
 pub use camera::{Intrinsics, Pose, rotation_error};
 pub use convert::{
     axis_angle_to_rotation, c2w_to_w2c, camera_center_from_w2c, look_at_c2w, quat_wxyz_to_rotation,

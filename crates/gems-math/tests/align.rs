@@ -141,3 +141,52 @@ proptest! {
         prop_assert!((est.trans - sim.trans).norm() < 1e-8 * (1.0 + sim.trans.norm()));
     }
 }
+
+#[test]
+fn camera_similarity_recovers_a_similarity_from_cameras_on_a_straight_line() {
+    // Centres on one line leave a centre-only alignment's rotation about it free; the cameras'
+    // orientations fix it.
+    let truth = Sim3 {
+        scale: 2.5,
+        rot: *So3::exp(&Vector3::new(0.4, -0.3, 1.1)).matrix(),
+        trans: Vector3::new(1.0, -2.0, 0.5),
+    };
+    let pairs: Vec<(Se3, Se3)> = (0..5)
+        .map(|i| {
+            let a = Se3::new(
+                *So3::exp(&Vector3::new(0.05 * i as f64, 0.1, -0.02 * i as f64)).matrix(),
+                Vector3::new(0.3 * i as f64, 0.0, 0.0),
+            );
+            let b = Se3::new(
+                truth.rot * a.rot,
+                truth.rot * a.trans * truth.scale + truth.trans,
+            );
+            (a, b)
+        })
+        .collect();
+    let got = camera_similarity(&pairs).unwrap();
+    assert!((got.scale - truth.scale).abs() < 1e-12);
+    assert!((got.rot - truth.rot).norm() < 1e-12);
+    assert!((got.trans - truth.trans).norm() < 1e-12);
+    assert!(
+        umeyama(
+            &pairs
+                .iter()
+                .map(|(a, _)| a.trans.into())
+                .collect::<Vec<_>>(),
+            &pairs
+                .iter()
+                .map(|(_, b)| b.trans.into())
+                .collect::<Vec<_>>(),
+            true
+        )
+        .is_err()
+    );
+    // One camera, or cameras at one centre, fix no scale.
+    assert!(camera_similarity(&pairs[..1]).is_none());
+    let same_centre: Vec<_> = pairs
+        .iter()
+        .map(|(a, b)| (Se3::new(a.rot, pairs[0].0.trans), *b))
+        .collect();
+    assert!(camera_similarity(&same_centre).is_none());
+}

@@ -333,11 +333,9 @@ pub fn run_colmap(
 }
 
 /// Adds to `second` every view `first` registered and `second` did not, placed in `second`'s
-/// frame by the similarity between the two models' shared cameras: its rotation the chordal mean
-/// of the camera-to-world rotations' differences R₂ᵢR₁ᵢᵀ, its scale and translation by least
-/// squares on the camera centres under that rotation (no centre-only Umeyama: a straight camera
-/// path leaves the rotation about it undetermined). Returns the names placed; none when fewer
-/// than two shared views with distinct centres fix the similarity.
+/// frame by the similarity between the two models' shared cameras
+/// ([`gems_math::camera_similarity`]). Returns the names placed; none when fewer than two shared
+/// views with distinct centres fix the similarity.
 ///
 /// Why: a held-out view keeps its blurry photo when the initialiser runs again on the renders,
 /// and blurry photos do not always register among sharp images; it still needs a pose for the
@@ -346,12 +344,11 @@ pub(crate) fn place_missing_views(
     first: &gems_data::colmap::SparseModel,
     second: &mut gems_data::colmap::SparseModel,
 ) -> Vec<String> {
-    use gems_math::{Matrix3, So3, Vector3};
     let c2w = |img: &gems_data::colmap::Image| {
         let p = img.pose();
-        (
-            Matrix3::from_fn(|r, c| p.rotation[c][r]),
-            Vector3::from(p.center()),
+        gems_math::Se3::new(
+            gems_math::Matrix3::from_fn(|r, c| p.rotation[c][r]),
+            gems_math::Vector3::from(p.center()),
         )
     };
     let shared: Vec<_> = first
@@ -365,36 +362,20 @@ pub(crate) fn place_missing_views(
         .filter(|a| second.image_by_name(&a.name).is_none())
         .cloned()
         .collect();
-    if missing.is_empty() || shared.len() < 2 {
+    if missing.is_empty() {
         return Vec::new();
     }
-    let sum = shared
-        .iter()
-        .fold(Matrix3::zeros(), |acc, ((r1, _), (r2, _))| {
-            acc + r2 * r1.transpose()
-        });
-    let rot = *So3::from_matrix_orthonormalized(&sum).matrix();
-    let n = shared.len() as f64;
-    let mean1 = shared.iter().map(|((_, c), _)| c).sum::<Vector3<f64>>() / n;
-    let mean2 = shared.iter().map(|(_, (_, c))| c).sum::<Vector3<f64>>() / n;
-    let (num, den) = shared
-        .iter()
-        .fold((0.0, 0.0), |(num, den), ((_, c1), (_, c2))| {
-            let x = rot * (c1 - mean1);
-            (num + (c2 - mean2).dot(&x), den + x.norm_squared())
-        });
-    if den <= f64::EPSILON {
+    let Some(sim) = gems_math::camera_similarity(&shared) else {
         return Vec::new();
-    }
-    let scale = num / den;
+    };
     let camera_id = second.images.first().map_or(1, |i| i.camera_id);
     let mut next_id = second.images.iter().map(|i| i.id).max().unwrap_or(0);
     missing
         .into_iter()
         .map(|img| {
-            let (r1, c1) = c2w(&img);
-            let r2 = rot * r1;
-            let c2 = mean2 + scale * (rot * (c1 - mean1));
+            let a = c2w(&img);
+            let r2 = sim.rot * a.rot;
+            let c2 = sim.scale * (sim.rot * a.trans) + sim.trans;
             let w2c = r2.transpose();
             let t = -(w2c * c2);
             let pose = gems_math::Pose {
