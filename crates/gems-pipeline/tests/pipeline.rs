@@ -192,3 +192,46 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     let resumed = run_with(&out, true);
     assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
 }
+
+#[test]
+fn the_run_proper_can_start_from_the_first_pass_gaussians() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene");
+    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    let run_with = |out: &std::path::Path, carry_over: bool, resume: bool| {
+        let mut req = request(&scene, out, InitRequest::new(Init::Sfm));
+        req.resume = resume;
+        req.cfg.init.sfm_rerun_fraction = 0.5;
+        req.cfg.init.sfm_rerun_min_steps = 1;
+        req.cfg.init.sfm_rerun_carry_over = carry_over;
+        req.evaluate = false;
+        req.open.hold = Some(0);
+        train_scene(req).unwrap()
+    };
+    let out = dir.path().join("carried");
+    let carried = run_with(&out, true, false);
+    let trained = gems_train::TrainOutput::load(&out).unwrap();
+    assert!(
+        trained.init_label.contains("the first pass's Gaussians"),
+        "{}",
+        trained.init_label
+    );
+    let cloud = std::fs::read(&carried.point_cloud).unwrap();
+    let fresh = run_with(&dir.path().join("fresh"), false, false);
+    assert_ne!(
+        cloud,
+        std::fs::read(&fresh.point_cloud).unwrap(),
+        "starting from the carried Gaussians changes the result"
+    );
+    // Resumed after the first pass and the second model: the first pass is read back from
+    // `first_pass/`, and the run is the same.
+    for f in [
+        "checkpoint.json",
+        "checkpoint.safetensors",
+        "point_cloud.ply",
+    ] {
+        std::fs::remove_file(out.join(f)).unwrap();
+    }
+    let resumed = run_with(&out, true, true);
+    assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
+}
