@@ -55,9 +55,6 @@ pub struct TrainJob<'a> {
     pub engine: Engine,
     /// Draw indicatif progress bars on stderr.
     pub progress: bool,
-    /// A first training whose Gaussians a fresh start carries over instead of the initial
-    /// model's points (`init.sfm_rerun_carry_over`).
-    pub carry_over: Option<&'a TrainOutput>,
 }
 
 /// What a run wrote.
@@ -102,7 +99,6 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         cfg.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
     }
     let mut engine = req.engine;
-    let mut first_pass = None;
     if let Some((first_steps, rest)) = cfg
         .sfm_rerun_split()
         .filter(|_| reruns_on_renders(init.init))
@@ -133,7 +129,6 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                     lpips: &[],
                     engine: Engine::default(),
                     progress: req.progress,
-                    carry_over: None,
                 },
                 engine,
             )?;
@@ -143,7 +138,6 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                 rerun_init_on_renders(&mut engine, &first, &source, &rerun, &init, cfg.seed);
             let rendered: Vec<String> = first.views.iter().map(|v| v.name.clone()).collect();
             keep_rerun = accept_rerun(second, &mode, &rerun, &rendered)?;
-            first_pass = Some(first);
         }
         if keep_rerun {
             mode = InitMode::Colmap(Some(rerun.join("sparse").join("0")));
@@ -151,18 +145,9 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             // initial poses are now accurate enough for straight paths first.
             cfg.steps = rest;
             cfg.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
-            if cfg.init.sfm_rerun_carry_over && first_pass.is_none() {
-                // Resumed after the first pass: its result is on disk.
-                first_pass = Some(TrainOutput::load(&req.output.join("first_pass"))?);
-            }
-        } else {
-            first_pass = None;
         }
         cfg.init.sfm_rerun_fraction = 0.0;
     }
-    let carry_over = first_pass
-        .as_ref()
-        .filter(|_| cfg.init.sfm_rerun_carry_over);
     train_and_report(TrainJob {
         scene: &req.scene,
         output: &req.output,
@@ -174,7 +159,6 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         lpips: &req.lpips,
         engine,
         progress: req.progress,
-        carry_over,
     })
 }
 
@@ -296,7 +280,7 @@ fn train_and_export(
         source,
     })?;
     let pose_model = pose_model_of(&job.mode, &scene);
-    let mut trainer = start_trainer(&scene, job, job.cfg.clone())?;
+    let mut trainer = start_trainer(&scene, &job.mode, job.cfg.clone(), job.resume, job.output)?;
     trainer.set_engine(engine);
     gems_fs::write_atomic(
         &job.output.join("config.toml"),
@@ -336,15 +320,15 @@ fn pose_model_of(mode: &InitMode, scene: &gems_data::Scene) -> Option<PathBuf> {
     }
 }
 
-/// A trainer resumed from the checkpoint in the job's output (with the configuration it was
-/// written with) when asked and there is one, else a fresh one with `cfg`, from the job's
-/// initial model or the Gaussians it carries over.
+/// A trainer resumed from the checkpoint in `output` (with the configuration it was written
+/// with) when asked and there is one, else a fresh one with `cfg`.
 fn start_trainer(
     scene: &gems_data::Scene,
-    job: &TrainJob<'_>,
+    mode: &InitMode,
     cfg: TrainConfig,
+    resume: bool,
+    output: &Path,
 ) -> Result<Trainer, PipelineError> {
-    let (mode, resume, output) = (&job.mode, job.resume, job.output);
     if resume && has_checkpoint(output) {
         let (ckpt_cfg, state) = load_checkpoint(output)?;
         let input = prepare_input(scene, mode, &ckpt_cfg)?;
@@ -364,12 +348,7 @@ fn start_trainer(
             output.display()
         );
     }
-    let mut input = prepare_input(scene, mode, &cfg)?;
-    if let Some(first) = job.carry_over {
-        input.gaussians =
-            gems_train::carry_over_gaussians(first, &input.views, input.gaussians.len())?;
-        input.init_label = format!("{} + the first pass's Gaussians", input.init_label);
-    }
+    let input = prepare_input(scene, mode, &cfg)?;
     tracing::info!(views = input.views.len(), gaussians = input.gaussians.len(), init = %input.init_label, "training");
     Ok(Trainer::new(cfg, input)?)
 }

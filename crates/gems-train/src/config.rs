@@ -223,11 +223,6 @@ pub struct InitConfig {
     /// `sfm_rerun_straight_fraction`.
     #[serde(alias = "sfm_rerun_straight_fraction")]
     pub accurate_poses_straight_fraction: f64,
-    /// Whether the run proper after `sfm_rerun_fraction` starts from the first pass's Gaussians
-    /// carried into the second model's frame (its most opaque ones, as many as the second
-    /// model's points would give; [`crate::carry_over_gaussians`]) instead of from the second
-    /// model's points, keeping the appearance the first pass learnt.
-    pub sfm_rerun_carry_over: bool,
 }
 
 /// How a sparse SfM cloud is topped up to `min_points`.
@@ -255,7 +250,6 @@ impl Default for InitConfig {
             sfm_rerun_fraction: 1.0 / 3.0,
             sfm_rerun_min_steps: 1000,
             accurate_poses_straight_fraction: 0.15,
-            sfm_rerun_carry_over: false,
         }
     }
 }

@@ -30,7 +30,6 @@
 // The CPU reference of gems-gpu's optimiser kernels (tested against it), hence public.
 pub mod adam;
 mod blur;
-mod carry_over;
 mod checkpoint;
 mod config;
 mod init;
@@ -45,7 +44,6 @@ pub use blur::{
     BlurWorkspace, Exposure, Rasterizer, accumulate_knot_gradients, backward_blurred,
     render_blurred, virtual_c2w, virtual_cameras,
 };
-pub use carry_over::carry_over_gaussians;
 pub use checkpoint::{
     CHECKPOINT_JSON, CHECKPOINT_TENSORS, has_checkpoint, load_checkpoint, save_checkpoint,
 };

@@ -143,7 +143,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         lpips: &[],
         engine: super::open_engine(args.device)?,
         progress: true,
-        carry_over: None,
     })?;
     let (Some(report), Some(metrics)) = (run.report, run.metrics) else {
         anyhow::bail!("evaluation produced no report");
