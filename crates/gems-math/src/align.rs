@@ -3,8 +3,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::MathError;
-use crate::{Se3, So3};
+use crate::{MathError, Se3, So3};
 
 /// A similarity transform p ↦ s·R·p + t.
 #[derive(Clone, Copy, Debug, PartialEq)]

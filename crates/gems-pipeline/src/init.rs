@@ -344,13 +344,7 @@ pub(crate) fn place_missing_views(
     first: &gems_data::colmap::SparseModel,
     second: &mut gems_data::colmap::SparseModel,
 ) -> Vec<String> {
-    let c2w = |img: &gems_data::colmap::Image| {
-        let p = img.pose();
-        gems_math::Se3::new(
-            gems_math::Matrix3::from_fn(|r, c| p.rotation[c][r]),
-            gems_math::Vector3::from(p.center()),
-        )
-    };
+    let c2w = |img: &gems_data::colmap::Image| gems_math::Se3::from(&img.pose()).inverse();
     let shared: Vec<_> = first
         .images
         .iter()
@@ -374,14 +368,9 @@ pub(crate) fn place_missing_views(
         .into_iter()
         .map(|img| {
             let a = c2w(&img);
-            let r2 = sim.rot * a.rot;
-            let c2 = sim.scale * (sim.rot * a.trans) + sim.trans;
-            let w2c = r2.transpose();
-            let t = -(w2c * c2);
-            let pose = gems_math::Pose {
-                rotation: std::array::from_fn(|r| std::array::from_fn(|c| w2c[(r, c)])),
-                translation: [t[0], t[1], t[2]],
-            };
+            let placed =
+                gems_math::Se3::new(sim.rot * a.rot, sim.scale * (sim.rot * a.trans) + sim.trans);
+            let pose = gems_math::Pose::from(&placed.inverse());
             next_id += 1;
             second.images.push(gems_data::colmap::Image::from_pose(
                 next_id, camera_id, &img.name, &pose,
