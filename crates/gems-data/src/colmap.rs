@@ -246,6 +246,129 @@ impl SparseModel {
     pub fn image_by_name(&self, name: &str) -> Option<&Image> {
         self.images.iter().find(|i| i.name == name)
     }
+
+    /// Renames this model's images to the scene's view `names` they stand for, so that
+    /// [`SparseModel::image_by_name`] finds each view by its own name, and says how they were
+    /// matched. A model made on other copies of the photos names them differently: Deblur-NeRF's
+    /// real scenes ship a `sparse/0` made on the PNG `images_4/` beside JPG `images/`. The rules,
+    /// in order (the one `images_<f>/` folders follow): the exact file name; the file stem
+    /// (`000.png` ↔ `000.jpg`); when the model has as many images as there are views and the
+    /// pairing contradicts no match found by name or stem, the sorted order of both. The first
+    /// rule that matches every view is taken, else the one that matches most. Images no view
+    /// matches keep their names.
+    pub fn key_by_view_names(&mut self, names: &[String]) -> NameMatch {
+        let exact = self.match_by(names, |n| n.to_owned());
+        let by_stem = self.match_by(names, |n| file_stem(n).to_owned());
+        let complete = |m: &[Option<usize>]| m.iter().all(Option::is_some);
+        let count = |m: &[Option<usize>]| m.iter().flatten().count();
+        let (rule, pairs) = if complete(&exact) {
+            (NameRule::Exact, exact)
+        } else if complete(&by_stem) {
+            (NameRule::Stem, by_stem)
+        } else if let Some(sorted) = self
+            .match_in_sorted_order(names)
+            .filter(|s| agrees(s, &exact) && agrees(s, &by_stem))
+        {
+            (NameRule::SortedOrder, sorted)
+        } else if count(&by_stem) > count(&exact) {
+            (NameRule::Stem, by_stem)
+        } else {
+            (NameRule::Exact, exact)
+        };
+        for (name, image) in names.iter().zip(&pairs) {
+            if let Some(i) = image {
+                self.images[*i].name.clone_from(name);
+            }
+        }
+        NameMatch {
+            rule,
+            matched: count(&pairs),
+            views: names.len(),
+            model_images: self.images.len(),
+        }
+    }
+
+    /// For each name, the index of the one image whose `key(image name)` equals `key(name)`
+    /// (`None` when no image or several share that key).
+    fn match_by(&self, names: &[String], key: impl Fn(&str) -> String) -> Vec<Option<usize>> {
+        let mut by_key: std::collections::HashMap<String, Option<usize>> = Default::default();
+        for (i, img) in self.images.iter().enumerate() {
+            by_key
+                .entry(key(&img.name))
+                .and_modify(|e| *e = None)
+                .or_insert(Some(i));
+        }
+        names
+            .iter()
+            .map(|n| by_key.get(&key(n)).copied().flatten())
+            .collect()
+    }
+
+    /// Each name paired with the image of the same rank when both are sorted by name; `None`
+    /// when the counts differ.
+    fn match_in_sorted_order(&self, names: &[String]) -> Option<Vec<Option<usize>>> {
+        if names.len() != self.images.len() {
+            return None;
+        }
+        let mut images: Vec<usize> = (0..self.images.len()).collect();
+        images.sort_by(|&a, &b| self.images[a].name.cmp(&self.images[b].name));
+        let mut views: Vec<usize> = (0..names.len()).collect();
+        views.sort_by(|&a, &b| names[a].cmp(&names[b]));
+        let mut pairs = vec![None; names.len()];
+        for (v, i) in views.into_iter().zip(images) {
+            pairs[v] = Some(i);
+        }
+        Some(pairs)
+    }
+}
+
+/// Whether every pair `partial` found is also in `full`.
+fn agrees(full: &[Option<usize>], partial: &[Option<usize>]) -> bool {
+    full.iter().zip(partial).all(|(f, p)| p.is_none() || f == p)
+}
+
+/// `000.png` → `000`; a name without an extension is its own stem.
+fn file_stem(name: &str) -> &str {
+    Path::new(name)
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or(name)
+}
+
+/// How a model's images were matched to a scene's views ([`SparseModel::key_by_view_names`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NameRule {
+    /// Same file names.
+    Exact,
+    /// Same file stems, other extensions.
+    Stem,
+    /// Both sorted by name and paired by rank.
+    SortedOrder,
+}
+
+impl NameRule {
+    /// Human-readable name, as `gems info` prints it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            NameRule::Exact => "by file name",
+            NameRule::Stem => "by file stem (other extension)",
+            NameRule::SortedOrder => "by sorted order (names differ, counts agree)",
+        }
+    }
+}
+
+/// The outcome of [`SparseModel::key_by_view_names`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct NameMatch {
+    /// The rule taken.
+    pub rule: NameRule,
+    /// Views that got a model image.
+    pub matched: usize,
+    /// Views in the scene.
+    pub views: usize,
+    /// Images in the model.
+    pub model_images: usize,
 }
 
 /// On-disk flavour of a COLMAP model.

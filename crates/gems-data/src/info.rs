@@ -90,6 +90,8 @@ pub struct SfmSummary {
     pub images: usize,
     /// 3D points.
     pub points: usize,
+    /// How its images were matched to the views, and how many were.
+    pub matched: Option<crate::colmap::NameMatch>,
 }
 
 /// What the event files hold.
@@ -191,6 +193,7 @@ pub fn scene_info(scene: &Scene, read_events: bool) -> Result<SceneInfo> {
             cameras: m.cameras.len(),
             images: m.images.len(),
             points: m.points.len(),
+            matched: scene.sfm_match,
         }),
         manifest: scene.manifest.clone(),
         events,
@@ -376,14 +379,25 @@ impl SceneInfo {
         }
         writeln!(f, "sharp gt   {} views", self.sharp_gt)?;
         match &self.sfm {
-            Some(m) => writeln!(
-                f,
-                "sfm        {} ({} cameras, {} images, {} points)",
-                m.dir.display(),
-                m.cameras,
-                m.images,
-                m.points
-            )?,
+            Some(m) => {
+                writeln!(
+                    f,
+                    "sfm        {} ({} cameras, {} images, {} points)",
+                    m.dir.display(),
+                    m.cameras,
+                    m.images,
+                    m.points
+                )?;
+                if let Some(k) = &m.matched {
+                    writeln!(
+                        f,
+                        "           {} of {} views posed by it, images matched {}",
+                        k.matched,
+                        k.views,
+                        k.rule.describe()
+                    )?;
+                }
+            }
             None => writeln!(f, "sfm        none")?,
         }
         if let Some(m) = &self.manifest {

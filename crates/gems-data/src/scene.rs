@@ -31,14 +31,19 @@
 //!    E2NeRF's real scenes hold `k` poses per image (the middle one is used). Optional ExBluRF
 //!    `poses_bounds_subframes.npy` gives ground-truth sub-frame poses. A `sparse/0/` beside the
 //!    poses file (Deblur-NeRF real scenes as redistributed) gives poses, intrinsics and points;
-//!    the poses file is then read and checked against the images only ([`Scene::uses`] says so).
+//!    the poses file then gives only the poses of views the model does not register, carried
+//!    into the model's frame by the similarity of the cameras both pose ([`Scene::uses`] says
+//!    which it gave).
 //! 5. **Folder** — a plain folder of photos or video frames: every image a training view, no
 //!    poses (the SfM makes them).
 //!
 //! [`Scene::dataset`] names the dataset a folder looks like, from the files each one ships.
 //!
 //! # Poses
-//! [`View::pose`] is the pose to start from (SfM model, else LLFF file, else transforms.json);
+//! [`View::pose`] is the pose to start from (SfM model, else LLFF file, else transforms.json).
+//! A COLMAP model's images are matched to the views by file name, else by stem (the model may
+//! have been made on the PNG copies of JPG photos), else by sorted order when the counts agree
+//! ([`colmap::SparseModel::key_by_view_names`]; [`Scene::sfm_match`] says which rule matched);
 //! [`View::gt_pose`] is ground truth: from `poses_bounds.npy` only when the manifest declares
 //! `poses: ground_truth`, or from PRISM3D's `sparse/0/images_gt.{bin,txt}` (matched by name).
 //! [`View::gt_subframe_poses`] come from `poses_bounds_subframes.npy` (ground truth by
@@ -242,6 +247,8 @@ pub struct Scene {
     pub sfm: Option<SparseModel>,
     /// Folder of the SfM model.
     pub sfm_dir: Option<PathBuf>,
+    /// How the scene's COLMAP model's images were matched to the views (`None`: no model).
+    pub sfm_match: Option<colmap::NameMatch>,
     /// Where `View::pose` comes from.
     pub pose_source: PoseSource,
     /// The manifest, if present.
@@ -865,6 +872,7 @@ fn new_scene(
         views,
         sfm: None,
         sfm_dir: None,
+        sfm_match: None,
         pose_source: PoseSource::None,
         manifest: None,
         events: EventFiles::default(),
@@ -931,24 +939,132 @@ fn attach_sharp(
     Ok(())
 }
 
-/// Reads the scene's COLMAP model (if any) into `scene`: poses, intrinsics, points.
+/// Reads the scene's COLMAP model (if any) into `scene`: poses, intrinsics, points. The model's
+/// images are matched to the views by name, stem or sorted order
+/// ([`SparseModel::key_by_view_names`]) and renamed to them; a model that matches no view is not
+/// used (and [`Scene::uses`] says so).
 fn attach_scene_sfm(scene: &mut Scene, undistort: bool, cache: &Cache) -> Result<()> {
     let Some(dir) = find_sfm_dir(&scene.root) else {
         return Ok(());
     };
-    let m = colmap::read_model(&dir)?;
+    let mut m = colmap::read_model(&dir)?;
+    let names: Vec<String> = scene.views.iter().map(|v| v.name.clone()).collect();
+    let matched = m.key_by_view_names(&names);
+    scene.sfm_match = Some(matched);
+    if matched.matched == 0 {
+        tracing::warn!(
+            dir = %dir.display(),
+            images = m.images.len(),
+            "the COLMAP model names none of the scene's views (by name, stem or sorted order): \
+             not used"
+        );
+        scene.uses.push(FileUse {
+            path: dir,
+            role: format!(
+                "not used: none of its {} images names one of the {} views (by file name, stem \
+                 or sorted order)",
+                m.images.len(),
+                names.len()
+            ),
+        });
+        return Ok(());
+    }
     attach_sfm(&mut scene.views, &m, &dir, undistort, cache)?;
     scene.pose_source = PoseSource::Sfm;
     scene.uses.push(FileUse {
         path: dir.clone(),
         role: format!(
-            "COLMAP model: starting poses, intrinsics and {} points (--init colmap)",
+            "COLMAP model: starting poses of {} of {} views (images matched {}), intrinsics and \
+             {} points (--init colmap)",
+            matched.matched,
+            matched.views,
+            matched.rule.describe(),
             m.points.len()
         ),
     });
     scene.sfm = Some(m);
     scene.sfm_dir = Some(dir);
     Ok(())
+}
+
+/// Poses from the scene's LLFF poses file, for the views that have none yet: all of them (with
+/// the file's intrinsics) when the scene has no usable COLMAP model, else only those the model
+/// does not register ([`fill_missing_from_poses_file`]). Returns the role to report for the file.
+fn poses_from_file(scene: &mut Scene, rows: &[LlffRow]) -> String {
+    match &scene.sfm {
+        Some(model) => fill_missing_from_poses_file(&mut scene.views, rows, model),
+        None => {
+            for (v, r) in scene.views.iter_mut().zip(rows) {
+                v.pose = Some(r.pose());
+                v.intrinsics = Some(r.intrinsics().resized(v.width, v.height));
+            }
+            scene.pose_source = PoseSource::Llff;
+            "starting poses and intrinsics".into()
+        }
+    }
+}
+
+/// What the poses file gives a scene that also has a COLMAP model: the poses of the views the
+/// model does not register, carried into the model's frame by the similarity between the two
+/// sources' cameras of the views both pose ([`gems_math::camera_similarity`]); LLFF poses come
+/// from the same kind of SfM run but are recentred and rescaled, so they are never mixed with
+/// the model's unaligned. Returns the role to report for the poses file.
+fn fill_missing_from_poses_file(
+    views: &mut [View],
+    rows: &[LlffRow],
+    model: &SparseModel,
+) -> String {
+    let c2w = |p: &Pose| gems_math::Se3::from(p).inverse();
+    let missing: Vec<usize> = (0..views.len())
+        .filter(|&i| views[i].pose.is_none())
+        .collect();
+    if missing.is_empty() {
+        return format!(
+            "read and checked ({} rows for {} images, finite rotations); poses not used: the \
+             COLMAP model gives them",
+            rows.len(),
+            views.len()
+        );
+    }
+    let shared: Vec<_> = views
+        .iter()
+        .zip(rows)
+        .filter_map(|(v, r)| Some((c2w(&r.pose()), c2w(v.pose.as_ref()?))))
+        .collect();
+    let Some(sim) = gems_math::camera_similarity(&shared) else {
+        return format!(
+            "not used: the COLMAP model leaves {} views without a pose, but shares too few \
+             cameras with this file ({}) to carry its poses into the model's frame",
+            missing.len(),
+            shared.len()
+        );
+    };
+    // One physical camera: the model's, when it has one; else the file's own.
+    let model_k = match model.cameras.as_slice() {
+        [cam] => cam.intrinsics().ok(),
+        _ => None,
+    };
+    let mut names = Vec::with_capacity(missing.len());
+    for i in missing {
+        let v = &mut views[i];
+        let placed = sim.act_c2w(&c2w(&rows[i].pose()));
+        v.pose = Some(Pose::from(&placed.inverse()));
+        let k = model_k.unwrap_or_else(|| rows[i].intrinsics());
+        v.intrinsics = Some(k.resized(v.width, v.height));
+        names.push(v.name.clone());
+    }
+    tracing::warn!(
+        views = %names.join(", "),
+        "not registered in the COLMAP model: posed from the poses file, aligned to the model's \
+         frame"
+    );
+    format!(
+        "poses of the {} views the COLMAP model does not register ({}), carried into the \
+         model's frame by the similarity of the {} cameras both pose",
+        names.len(),
+        names.join(", "),
+        shared.len()
+    )
 }
 
 fn open_gems(
@@ -977,31 +1093,18 @@ fn open_gems(
     let ground_truth = manifest.is_some_and(|m| m.poses == ManifestPoses::GroundTruth);
     if let Some(pb) = poses_file(root) {
         let rows = llff_rows_for(&pb, scene.views.len())?;
-        let has_sfm = scene.sfm.is_some();
-        for (v, r) in scene.views.iter_mut().zip(&rows) {
-            if ground_truth {
-                v.gt_pose = Some(r.pose());
-            } else if !has_sfm {
-                v.pose = Some(r.pose());
-            }
-            if v.intrinsics.is_none() {
-                v.intrinsics = Some(r.intrinsics().resized(v.width, v.height));
-            }
-        }
         let role = if ground_truth {
-            "ground-truth mid-exposure poses (declared by gems_scene.json)"
-        } else if has_sfm {
-            "read and checked (count, finite rotations); poses not used: the COLMAP model gives them"
+            for (v, r) in scene.views.iter_mut().zip(&rows) {
+                v.gt_pose = Some(r.pose());
+                if v.intrinsics.is_none() {
+                    v.intrinsics = Some(r.intrinsics().resized(v.width, v.height));
+                }
+            }
+            "ground-truth mid-exposure poses (declared by gems_scene.json)".to_owned()
         } else {
-            "starting poses and intrinsics"
+            poses_from_file(&mut scene, &rows)
         };
-        scene.uses.push(FileUse {
-            path: pb,
-            role: role.into(),
-        });
-        if !ground_truth && !has_sfm {
-            scene.pose_source = PoseSource::Llff;
-        }
+        scene.uses.push(FileUse { path: pb, role });
     }
     if let Some(dir) = scene.sfm_dir.clone() {
         attach_prism3d_gt(&mut scene.views, &dir)?;
@@ -1035,12 +1138,10 @@ fn open_llff(
     let gt_blur = root.join("images_gt_blur");
     let gt_novel = root.join("images_gt_novel");
     let separate = gt_blur.is_dir() || gt_novel.is_dir();
-    for (v, r) in views.iter_mut().zip(&rows) {
+    for v in &mut views {
         if v.split == Split::NovelView && !separate {
             v.sharp_gt = Some(v.image.clone());
         }
-        v.pose = Some(r.pose());
-        v.intrinsics = Some(r.intrinsics().resized(v.width, v.height));
     }
     let mut scene = new_scene(root, Layout::Llff, opts, hold, views);
     for (dir, only) in [(&gt_blur, Split::Train), (&gt_novel, Split::NovelView)] {
@@ -1050,28 +1151,9 @@ fn open_llff(
             attach_sharp(&mut scene.views, sharp, dir, hold, Some(only))?;
         }
     }
-    scene.pose_source = PoseSource::Llff;
-    if find_sfm_dir(root).is_some() {
-        // Poses come from one source only: the model's frame need not be the poses file's.
-        for v in &mut scene.views {
-            v.pose = None;
-        }
-        attach_scene_sfm(&mut scene, undistort, cache)?;
-        scene.uses.push(FileUse {
-            path: pb,
-            role: format!(
-                "read and checked ({} rows for {} images, finite rotations); poses not used: the \
-                 COLMAP model gives them",
-                rows.len(),
-                scene.views.len()
-            ),
-        });
-    } else {
-        scene.uses.push(FileUse {
-            path: pb,
-            role: "starting poses and intrinsics".into(),
-        });
-    }
+    attach_scene_sfm(&mut scene, undistort, cache)?;
+    let role = poses_from_file(&mut scene, &rows);
+    scene.uses.push(FileUse { path: pb, role });
     let sub = root.join("poses_bounds_subframes.npy");
     if sub.is_file() {
         attach_subframes(&mut scene.views, &sub)?;

@@ -414,3 +414,64 @@ proptest! {
         prop_assert_eq!(&parse_points3d_txt(&points3d_to_txt(&points)).unwrap(), &points);
     }
 }
+
+fn named(names: &[&str]) -> SparseModel {
+    SparseModel {
+        cameras: vec![],
+        images: names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| Image::from_pose(i as u32 + 1, 1, n, &gems_math::Pose::IDENTITY))
+            .collect(),
+        points: vec![],
+    }
+}
+
+fn strings(names: &[&str]) -> Vec<String> {
+    names.iter().map(|s| s.to_string()).collect()
+}
+
+#[test]
+fn model_images_are_keyed_by_name_then_stem_then_sorted_order() {
+    // Exact names: nothing renamed.
+    let mut m = named(&["b.jpg", "a.jpg"]);
+    let k = m.key_by_view_names(&strings(&["a.jpg", "b.jpg"]));
+    assert_eq!((k.rule, k.matched, k.views), (NameRule::Exact, 2, 2));
+    assert_eq!(m.images[0].name, "b.jpg");
+    // Stems (a model made on the PNG copies of JPG photos), in any order.
+    let mut m = named(&["001.png", "000.png", "002.png"]);
+    let k = m.key_by_view_names(&strings(&["000.jpg", "001.jpg", "002.jpg"]));
+    assert_eq!((k.rule, k.matched), (NameRule::Stem, 3));
+    assert_eq!(m.images[0].name, "001.jpg");
+    assert_eq!(m.image_by_name("000.jpg").unwrap().id, 2);
+    // Other names, same count: sorted order.
+    let mut m = named(&["frame_b.png", "frame_a.png"]);
+    let k = m.key_by_view_names(&strings(&["IMG_1.JPG", "IMG_2.JPG"]));
+    assert_eq!((k.rule, k.matched), (NameRule::SortedOrder, 2));
+    assert_eq!(m.image_by_name("IMG_1.JPG").unwrap().id, 2);
+    // Sorted order that contradicts a match by stem is not taken: the stem match stands alone.
+    // (sorted, a.jpg would take b.png and b.jpg c.png).
+    let mut m = named(&["c.png", "b.png"]);
+    let k = m.key_by_view_names(&strings(&["a.jpg", "b.jpg"]));
+    assert_eq!((k.rule, k.matched), (NameRule::Stem, 1));
+    assert_eq!(m.image_by_name("b.jpg").unwrap().id, 2);
+    assert!(m.image_by_name("a.jpg").is_none());
+    // One that agrees with the stems it found is taken.
+    let mut m = named(&["c.png", "a.png"]);
+    let k = m.key_by_view_names(&strings(&["a.jpg", "b.jpg"]));
+    assert_eq!((k.rule, k.matched), (NameRule::SortedOrder, 2));
+    assert_eq!(m.image_by_name("b.jpg").unwrap().id, 1);
+    // Fewer model images than views: the partial match by stem, the rest unposed.
+    let mut m = named(&["000.png", "002.png"]);
+    let k = m.key_by_view_names(&strings(&["000.jpg", "001.jpg", "002.jpg"]));
+    assert_eq!((k.rule, k.matched, k.model_images), (NameRule::Stem, 2, 2));
+    // Two images with one stem match neither view by stem.
+    let mut m = named(&["a.png", "a.jpg", "z.png"]);
+    let k = m.key_by_view_names(&strings(&["a.tif", "q.tif"]));
+    assert_eq!(k.matched, 0);
+    // Nothing in common, counts differ: no match, nothing renamed.
+    let mut m = named(&["x.png"]);
+    let k = m.key_by_view_names(&strings(&["a.jpg", "b.jpg"]));
+    assert_eq!(k.matched, 0);
+    assert_eq!(m.images[0].name, "x.png");
+}

@@ -560,3 +560,182 @@ fn nerf_synthetic_scene_opens_and_a_split_without_images_is_an_error() {
     assert!(s.views[0].gt_subframe_poses.is_none());
     assert_eq!("blender".parse::<Layout>(), Ok(Layout::Blender));
 }
+
+/// The committed fixture `testdata/scenes/deblur_nerf_real_png_model/`: a Deblur-NeRF real scene
+/// as redistributed (`Dojizz/NGP-Deblur-NeRF:blurball`), in miniature. JPG photos in `images/`,
+/// PNG copies in `images_4/`, `poses_bounds.npy`, `hold=7`, and a `sparse/0` made on the PNG
+/// copies: its images are named `000.png`…, in a frame other than the poses file's (scaled,
+/// rotated, moved), and it leaves `004` unregistered, as COLMAP does with a photo too blurred.
+fn fixture_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../testdata/scenes/deblur_nerf_real_png_model")
+}
+
+const FIXTURE_VIEWS: usize = 9;
+const FIXTURE_UNREGISTERED: usize = 4;
+
+/// The similarity from the fixture's poses-file frame to its model's frame.
+fn fixture_similarity() -> gems_math::Sim3 {
+    let r = Pose::from_quaternion([0.9, 0.1, -0.3, 0.2], [0.0; 3]);
+    gems_math::Sim3 {
+        scale: 2.5,
+        rot: gems_math::Se3::from(&r).rot,
+        trans: gems_math::Vector3::new(0.4, -1.0, 3.0),
+    }
+}
+
+fn fixture_model_pose(i: usize) -> Pose {
+    let c2w = gems_math::Se3::from(&pose(i)).inverse();
+    Pose::from(&fixture_similarity().act_c2w(&c2w).inverse())
+}
+
+/// Writes the fixture: `GEMS_WRITE_FIXTURES=1 cargo test --release -p gems-data --test datasets
+/// write_png_model_fixture`. Without the variable it checks that the committed files are the
+/// ones this code writes (so the fixture and its description cannot drift apart).
+#[test]
+fn write_png_model_fixture() {
+    let out = tempfile::tempdir().unwrap();
+    let root = if std::env::var_os("GEMS_WRITE_FIXTURES").is_some() {
+        fixture_root()
+    } else {
+        out.path().to_path_buf()
+    };
+    let (w, h) = (32, 24);
+    for i in 0..FIXTURE_VIEWS {
+        write_img(&root.join(format!("images/{i:03}.jpg")), w, h, i as u32);
+        write_img(
+            &root.join(format!("images_4/{i:03}.png")),
+            w / 4,
+            h / 4,
+            i as u32,
+        );
+    }
+    llff::write_poses_bounds(&root.join("poses_bounds.npy"), &rows(FIXTURE_VIEWS, w, h)).unwrap();
+    let model = SparseModel {
+        cameras: vec![Camera {
+            id: 1,
+            model: CameraModel::Pinhole,
+            width: (w / 4) as u64,
+            height: (h / 4) as u64,
+            params: vec![7.5, 7.5, 4.0, 3.0],
+        }],
+        images: (0..FIXTURE_VIEWS)
+            .filter(|&i| i != FIXTURE_UNREGISTERED)
+            .map(|i| {
+                Image::from_pose(
+                    i as u32 + 1,
+                    1,
+                    &format!("{i:03}.png"),
+                    &fixture_model_pose(i),
+                )
+            })
+            .collect(),
+        points: vec![],
+    };
+    colmap::write_model(&root.join("sparse/0"), &model, ModelFormat::Binary).unwrap();
+    write_hold_marker(&root, 7).unwrap();
+    if root != fixture_root() {
+        // Compare the files that do not depend on an image encoder's version.
+        for f in [
+            "poses_bounds.npy",
+            "sparse/0/images.bin",
+            "sparse/0/cameras.bin",
+            "hold=7",
+        ] {
+            assert_eq!(
+                std::fs::read(root.join(f)).unwrap(),
+                std::fs::read(fixture_root().join(f)).unwrap(),
+                "{f} differs from the committed fixture"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_png_named_model_poses_jpg_photos_and_the_poses_file_fills_what_it_misses() {
+    let root = fixture_root();
+    let before = snapshot(&root);
+    let dir = tempfile::tempdir().unwrap();
+    let opts = OpenOptions {
+        downscale: 4,
+        cache_dir: Some(dir.path().to_path_buf()),
+        ..OpenOptions::default()
+    };
+    let s = open_scene(&root, &opts).unwrap();
+    assert_eq!(snapshot(&root), before, "opening wrote into the scene");
+    assert_eq!(s.views.len(), FIXTURE_VIEWS);
+    assert_eq!(s.pose_source, PoseSource::Sfm);
+    let m = s.sfm_match.unwrap();
+    assert_eq!(m.rule, colmap::NameRule::Stem);
+    assert_eq!((m.matched, m.views), (FIXTURE_VIEWS - 1, FIXTURE_VIEWS));
+    // Every view has a pose in the model's frame: the registered ones the model's own, the one
+    // it misses the poses file's carried by the similarity of the other eight.
+    for (i, v) in s.views.iter().enumerate() {
+        let got = v.pose.unwrap_or_else(|| panic!("{} has no pose", v.name));
+        let want = fixture_model_pose(i);
+        let d = gems_math::Se3::from(&got).inverse();
+        let e = gems_math::Se3::from(&want).inverse();
+        assert!(
+            (d.trans - e.trans).norm() < 1e-9 && (d.rot - e.rot).norm() < 1e-9,
+            "{}: {got:?} vs {want:?}",
+            v.name
+        );
+        let k = v.intrinsics.unwrap();
+        assert!((k.fx - 7.5).abs() < 1e-12, "{}: {k:?}", v.name);
+    }
+    // The model, keyed by the views' names, finds each registered view.
+    let model = s.sfm.as_ref().unwrap();
+    assert!(model.image_by_name("000.jpg").is_some());
+    assert!(model.image_by_name("004.jpg").is_none());
+    let uses: Vec<String> = s
+        .uses
+        .iter()
+        .map(|u| format!("{}: {}", u.path.display(), u.role))
+        .collect();
+    assert!(
+        uses.iter().any(|u| u.contains("sparse/0")
+            && u.contains("8 of 9 views")
+            && u.contains("by file stem")),
+        "{uses:?}"
+    );
+    assert!(
+        uses.iter().any(|u| u.contains("poses_bounds.npy")
+            && u.contains("004.jpg")
+            && u.contains("model's frame")),
+        "{uses:?}"
+    );
+    assert!(!uses.iter().any(|u| u.contains("not used")), "{uses:?}");
+    let text = scene_info(&s, false).unwrap().to_string();
+    assert!(
+        text.contains("8 of 9 views posed by it, images matched by file stem"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_model_that_names_no_view_is_not_used_and_the_poses_file_poses_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("scene");
+    make_deblur_nerf_real(&root, 9);
+    // A model of two images no view is called.
+    let mut model = colmap::read_model(&root.join("sparse/0")).unwrap();
+    model.images.truncate(2);
+    model.images[0].name = "x.png".into();
+    model.images[1].name = "y.png".into();
+    colmap::write_model(&root.join("sparse/0"), &model, ModelFormat::Binary).unwrap();
+    let s = open_scene(&root, &OpenOptions::default()).unwrap();
+    assert_eq!(s.pose_source, PoseSource::Llff);
+    assert!(s.sfm.is_none());
+    assert_eq!(s.sfm_match.unwrap().matched, 0);
+    assert!(s.views.iter().all(|v| v.pose.is_some()));
+    let roles: Vec<&str> = s.uses.iter().map(|u| u.role.as_str()).collect();
+    assert!(
+        roles
+            .iter()
+            .any(|r| r.starts_with("not used: none of its 2 images")),
+        "{roles:?}"
+    );
+    assert!(
+        roles.contains(&"starting poses and intrinsics"),
+        "{roles:?}"
+    );
+}

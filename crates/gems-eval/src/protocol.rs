@@ -320,7 +320,12 @@ pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalD
         data.train_blurry.push(blurry);
     }
     let pose_model = match &output.pose_model {
-        Some(dir) => Some(gems_data::colmap::read_model(dir)?),
+        Some(dir) => {
+            let mut model = gems_data::colmap::read_model(dir)?;
+            let names: Vec<String> = scene.views.iter().map(|v| v.name.clone()).collect();
+            model.key_by_view_names(&names);
+            Some(model)
+        }
         None => None,
     };
     for s in scene.views.iter().filter(|s| s.split == Split::NovelView) {

@@ -25,6 +25,15 @@ impl Sim3 {
     pub fn act(&self, p: &[f64; 3]) -> [f64; 3] {
         (self.rot * Vector3::from(*p) * self.scale + self.trans).into()
     }
+
+    /// A camera (camera-to-world pose) carried by this similarity: its centre mapped, its
+    /// orientation rotated; the scale changes only where the centre lies.
+    pub fn act_c2w(&self, c2w: &Se3) -> Se3 {
+        Se3::new(
+            self.rot * c2w.rot,
+            self.scale * (self.rot * c2w.trans) + self.trans,
+        )
+    }
 }
 
 /// Least-squares (s, R, t) minimising Σ‖dst_i − (s R src_i + t)‖² (Umeyama 1991, evo's variant):

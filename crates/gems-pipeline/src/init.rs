@@ -368,9 +368,7 @@ pub(crate) fn place_missing_views(
         .into_iter()
         .map(|img| {
             let a = c2w(&img);
-            let placed =
-                gems_math::Se3::new(sim.rot * a.rot, sim.scale * (sim.rot * a.trans) + sim.trans);
-            let pose = gems_math::Pose::from(&placed.inverse());
+            let pose = gems_math::Pose::from(&sim.act_c2w(&a).inverse());
             next_id += 1;
             second.images.push(gems_data::colmap::Image::from_pose(
                 next_id, camera_id, &img.name, &pose,

@@ -175,10 +175,30 @@ pub fn prepare_input(
 /// ground-truth modes the scene's `gt/sparse/0` when it has one (for its points).
 fn initial_model(scene: &Scene, mode: &InitMode) -> Result<Option<SparseModel>, TrainError> {
     Ok(match mode {
-        InitMode::Colmap(Some(dir)) => Some(load_model(dir)?),
+        InitMode::Colmap(Some(dir)) => {
+            let mut model = load_model(dir)?;
+            let names: Vec<String> = scene.views.iter().map(|v| v.name.clone()).collect();
+            let matched = model.key_by_view_names(&names);
+            tracing::info!(
+                dir = %dir.display(),
+                matched = matched.matched,
+                views = matched.views,
+                "COLMAP model's images matched {}",
+                matched.rule.describe()
+            );
+            Some(model)
+        }
         InitMode::Colmap(None) => Some(scene.sfm.clone().ok_or_else(|| {
+            let why = match scene.sfm_match {
+                Some(m) => format!(
+                    "its COLMAP model names none of its {} views (by file name, stem or sorted \
+                     order)",
+                    m.views
+                ),
+                None => "no sparse model".to_owned(),
+            };
             TrainError::Input(format!(
-                "{}: no sparse model (run `gems sfm` or use --init gt)",
+                "{}: {why} (run `gems sfm`, pass --colmap-model, or use --init sfm)",
                 scene.root.display()
             ))
         })?),
