@@ -87,6 +87,82 @@ pub struct RotationErrorSummary {
     pub max_deg: f64,
 }
 
+/// How the held-out views were posed for the novel-view figures: at a source's poses, carried
+/// into the trained frame by the similarity between that source's training cameras and the
+/// trained mid-exposure ones (the published tables render at the dataset's poses; a method that
+/// optimises its cameras must first be brought into their frame). Refinement starts there too.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HeldOutPosing {
+    /// Where the poses come from ("the dataset's poses (its COLMAP model)", …).
+    pub source: String,
+    /// Training cameras the similarity was fitted on; 0 when too few: the poses were then used
+    /// as they are, in the initial frame.
+    pub similarity_cameras: usize,
+}
+
+impl HeldOutPosing {
+    /// One line: "at the dataset's poses (its COLMAP model), carried into the trained frame by
+    /// the similarity of 23 training cameras".
+    pub fn describe(&self) -> String {
+        if self.similarity_cameras > 0 {
+            format!(
+                "{}, carried into the trained frame by the similarity of {} training cameras",
+                self.source, self.similarity_cameras
+            )
+        } else {
+            format!(
+                "{}, as they are (too few training cameras for a similarity)",
+                self.source
+            )
+        }
+    }
+}
+
+/// How far the trained mid-exposure cameras lie from the held-out views' pose source's cameras
+/// of the same training views (and how far the initial cameras lay), after the similarity:
+/// centres as RMSE in % of the largest distance between two of those cameras, rotations as RMSE
+/// in degrees. From a dataset's COLMAP model the initial figures are 0 and the trained ones say
+/// how far training moved the cameras.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CameraShift {
+    pub views: usize,
+    pub centre_pct: f64,
+    pub rotation_deg: f64,
+    pub initial_centre_pct: f64,
+    pub initial_rotation_deg: f64,
+}
+
+/// What each split of [`MetricsReport`] measures, by its JSON key (also in `metrics.json` under
+/// `labels`, and the words the console and the report use).
+pub fn split_labels() -> [(&'static str, &'static str); 5] {
+    [
+        (
+            "input",
+            "blurry input: each blurry training photo against its sharp image",
+        ),
+        (
+            "deblur",
+            "deblurring: training views rendered at their trajectory midpoint",
+        ),
+        (
+            "deblur_refined",
+            "deblurring, refined: training views after test-time pose refinement from their \
+             initial pose (the GeMS authors' protocol)",
+        ),
+        (
+            "nvs_no_pose_opt",
+            "novel views, unrefined: held-out views rendered at their reference pose (the \
+             dataset's when it has poses; see held_out_pose) carried into the trained frame (the \
+             published tables' protocol)",
+        ),
+        (
+            "nvs",
+            "novel views, refined: held-out views after test-time pose refinement from that pose \
+             (BAD-Gaussians' and GeMS's protocol)",
+        ),
+    ]
+}
+
 /// The `metrics.json` document.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MetricsReport {
@@ -121,6 +197,21 @@ pub struct MetricsReport {
     pub gaussians: usize,
     /// How poses and points were initialised (e.g. "gt-noisy (σ …)"), shown in the report.
     pub init: String,
+    /// What each split measures, by key ([`split_labels`]).
+    #[serde(default)]
+    pub labels: std::collections::BTreeMap<String, String>,
+    /// How the held-out views were posed (`nvs_no_pose_opt`, and where `nvs` starts).
+    #[serde(default)]
+    pub held_out_pose: Option<HeldOutPosing>,
+    /// How far training moved the cameras from the held-out views' pose source's.
+    #[serde(default)]
+    pub camera_shift: Option<CameraShift>,
+    /// What the user ran: protocol, data, initialisation, schedule, device, cost.
+    #[serde(default)]
+    pub run: Option<gems_train::RunDescription>,
+    /// Wall time of the evaluation, s.
+    #[serde(default)]
+    pub eval_seconds: Option<f64>,
 }
 
 /// Scores a render against its ground truth. The render is clamped to [0, 1] first (PRISM3D

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use gems_data::{OpenOptions, Scene, Split, load_image, open_scene};
+use gems_data::{OpenOptions, PoseSource, Scene, Split, load_image, open_scene};
 use gems_gpu::Engine;
 use gems_math::{Intrinsics, Se3};
 use gems_metrics::Lpips;
@@ -12,8 +12,9 @@ use gems_train::TrainOutput;
 
 use crate::EvalError;
 use crate::metrics::{
-    ApeSummary, EvalView, MetricsReport, PoseMode, RotationErrorSummary, SplitResult, SplitScores,
-    ape_of_centres, evaluate_views_with_progress, relative_rotation_error, score_image,
+    ApeSummary, CameraShift, EvalView, HeldOutPosing, MetricsReport, PoseMode,
+    RotationErrorSummary, SplitResult, SplitScores, ape_of_centres, evaluate_views_with_progress,
+    relative_rotation_error, score_image,
 };
 use crate::refine::PoseRefineConfig;
 use crate::report::{GridRow, ReportInput};
@@ -43,6 +44,10 @@ pub struct EvalData {
     /// [`attach_edi_images`] found them), the report's GeMS-E column.
     pub train_edi: Vec<Option<Vec<f32>>>,
     pub held_out: Vec<HeldOutView>,
+    /// How `held_out` was posed.
+    pub held_out_posing: Option<HeldOutPosing>,
+    /// How far the trained cameras moved from the held-out views' pose source's cameras.
+    pub camera_shift: Option<CameraShift>,
 }
 
 /// Everything one evaluation produced.
@@ -146,6 +151,14 @@ pub fn evaluate_output_on(
         seconds: output.seconds,
         gaussians: gaussians.len(),
         init: output.init_label.clone(),
+        labels: crate::metrics::split_labels()
+            .into_iter()
+            .map(|(k, v)| (k.to_owned(), v.to_owned()))
+            .collect(),
+        held_out_pose: data.held_out_posing.clone(),
+        camera_shift: data.camera_shift,
+        run: output.run.clone(),
+        eval_seconds: None,
     };
     Ok(Evaluation {
         metrics,
@@ -300,10 +313,9 @@ fn load_rgb(path: &Path, k: &Intrinsics) -> Result<Vec<f32>, EvalError> {
 
 /// Ground truth from the scene the result was trained on (opened at the training resolution):
 /// sharp images of the training views matched by name, blurry inputs for the report, and the
-/// held-out views with a sharp ground truth, their initial pose ([`gems_data::View::pose`], the
-/// scene's pose source, or the ground-truth pose when the scene has no other) mapped into the
-/// normalised frame of the result, and their intrinsics
-/// (the scene's, or without an SfM model the trained views' camera scaled to the image size).
+/// held-out views with a sharp ground truth, posed as [`held_out_reference`] says and carried
+/// into the trained frame by the similarity between the same source's training cameras and the
+/// trained ones ([`EvalData::held_out_posing`]).
 pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalData, EvalError> {
     let mut data = EvalData::default();
     for v in &output.views {
@@ -328,38 +340,57 @@ pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalD
         }
         None => None,
     };
+    let reference = held_out_reference(scene, pose_model.as_ref());
+    // Training cameras in both frames: the reference's and the trained mid-exposure ones (input
+    // frame).
+    let pairs: Vec<(Se3, Se3)> = output
+        .views
+        .iter()
+        .filter_map(|v| {
+            let p = (reference.pose)(v.name.as_str())?;
+            Some((
+                Se3::from(&p.0).inverse(),
+                to_input_frame(output, &se3(&v.mid_c2w)),
+            ))
+        })
+        .collect();
+    let similarity = gems_math::camera_similarity(&pairs);
+    data.camera_shift = similarity.as_ref().and_then(|sim| {
+        let initial: Vec<(Se3, Se3)> = output
+            .views
+            .iter()
+            .filter_map(|v| {
+                let p = (reference.pose)(v.name.as_str())?;
+                Some((
+                    Se3::from(&p.0).inverse(),
+                    to_input_frame(output, &se3(&v.c2w_init)),
+                ))
+            })
+            .collect();
+        camera_shift(sim, &pairs, &initial)
+    });
+    data.held_out_posing = Some(HeldOutPosing {
+        source: reference.source.clone(),
+        similarity_cameras: if similarity.is_some() { pairs.len() } else { 0 },
+    });
     for s in scene.views.iter().filter(|s| s.split == Split::NovelView) {
         let Some(gt_path) = &s.sharp_gt else { continue };
-        // Poses of held-out views come from where the training poses came from: the model the
-        // result was initialised from, or else the scene's pose source; without either, the
-        // ground truth is the only pose there is (the result was then trained from it too).
-        let (pose, model_k) = match &pose_model {
-            Some(m) => match m.image_by_name(&s.name) {
-                Some(img) => {
-                    let k = m
-                        .camera(img.camera_id)
-                        .and_then(|c| c.intrinsics().ok())
-                        .map(|k| k.resized(s.width, s.height));
-                    (Some(img.pose()), k)
-                }
-                None => (None, None),
-            },
-            None => (s.pose.or(s.gt_pose), None),
-        };
-        let Some(pose) = pose else {
-            tracing::warn!(view = %s.name, "held-out view has no initial pose; not evaluated");
+        let Some((pose, model_k)) = (reference.pose)(s.name.as_str()) else {
+            tracing::warn!(view = %s.name, "held-out view has no pose; not evaluated");
             continue;
         };
-        // Without an SfM model the scene knows no intrinsics; the datasets use one camera, so
-        // take the trained views' camera at this image size.
-        let k = match model_k.or(s.intrinsics) {
-            Some(k) => k,
-            None => match output.views.first() {
-                Some(v) => v.intrinsics.resized(s.width, s.height),
-                None => continue,
-            },
+        // The trained frame's camera: the model the run started from, else the trained views'
+        // (the datasets use one camera), at this image's size. The dataset's own intrinsics
+        // belong to its frame, not necessarily to the one the result was trained in.
+        let k = match model_k.or_else(|| output.views.first().map(|v| v.intrinsics)) {
+            Some(k) => k.resized(s.width, s.height),
+            None => continue,
         };
-        let c2w = Se3::from(pose).inverse();
+        let c2w_ref = Se3::from(&pose).inverse();
+        let c2w = match &similarity {
+            Some(sim) => sim.act_c2w(&c2w_ref),
+            None => c2w_ref,
+        };
         let (r, t) = output.normalization.apply_c2w(&c2w.rot, &c2w.trans);
         data.held_out.push(HeldOutView {
             name: s.name.clone(),
@@ -369,6 +400,94 @@ pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalD
         });
     }
     Ok(data)
+}
+
+/// Where the poses of held-out views come from, and a lookup of the pose (world-to-camera) and,
+/// when the source knows it, the camera of a view by name.
+struct Reference<'a> {
+    source: String,
+    #[allow(clippy::type_complexity)]
+    pose: Box<dyn Fn(&str) -> Option<(gems_math::Pose, Option<Intrinsics>)> + 'a>,
+}
+
+/// The poses held-out views are evaluated at, in order of preference: the dataset's own (the
+/// scene's COLMAP model, poses file or transforms — what the published tables render at); else
+/// the model the run was initialised from (the built-in SfM registers held-out photos too);
+/// else the ground truth. The camera comes from the initialisation's model when it has the
+/// view.
+fn held_out_reference<'a>(
+    scene: &'a Scene,
+    pose_model: Option<&'a gems_data::colmap::SparseModel>,
+) -> Reference<'a> {
+    let model_camera = move |name: &str| -> Option<Intrinsics> {
+        let m = pose_model?;
+        let img = m.image_by_name(name)?;
+        m.camera(img.camera_id)?.intrinsics().ok()
+    };
+    let held_out = || scene.views.iter().filter(|v| v.split == Split::NovelView);
+    let view = move |name: &str| scene.views.iter().find(|v| v.name == name);
+    if scene.pose_source != PoseSource::None && held_out().any(|v| v.pose.is_some()) {
+        let what = match scene.pose_source {
+            PoseSource::Sfm => "its COLMAP model",
+            PoseSource::Llff => "its poses file",
+            PoseSource::Nerfstudio => "its transforms file",
+            PoseSource::None => unreachable!("checked above"),
+        };
+        return Reference {
+            source: format!("the dataset's poses ({what})"),
+            pose: Box::new(move |name| Some((view(name)?.pose?, model_camera(name)))),
+        };
+    }
+    if let Some(m) = pose_model {
+        return Reference {
+            source: "the initialisation's model (the SfM registers held-out photos too)".into(),
+            pose: Box::new(move |name| Some((m.image_by_name(name)?.pose(), model_camera(name)))),
+        };
+    }
+    Reference {
+        source: "the ground-truth poses".into(),
+        pose: Box::new(move |name| Some((view(name)?.gt_pose?, None))),
+    }
+}
+
+/// How far the trained mid-exposure cameras (and the initial ones) lie from the reference
+/// cameras, after the similarity fitted between reference and trained cameras.
+fn camera_shift(
+    sim: &gems_math::Sim3,
+    trained: &[(Se3, Se3)],
+    initial: &[(Se3, Se3)],
+) -> Option<CameraShift> {
+    let centres: Vec<_> = trained.iter().map(|(r, _)| sim.act_c2w(r).trans).collect();
+    let extent = centres
+        .iter()
+        .flat_map(|a| centres.iter().map(move |b| (a - b).norm()))
+        .fold(0.0, f64::max);
+    if extent <= 0.0 {
+        return None;
+    }
+    let rmse = |pairs: &[(Se3, Se3)]| -> (f64, f64) {
+        let n = pairs.len().max(1) as f64;
+        let (c, r) = pairs.iter().fold((0.0, 0.0), |(c, r), (a, b)| {
+            let a = sim.act_c2w(a);
+            let dr = gems_math::So3::from_matrix_orthonormalized(&(a.rot.transpose() * b.rot))
+                .log()
+                .norm();
+            (
+                c + (a.trans - b.trans).norm_squared(),
+                r + dr.to_degrees().powi(2),
+            )
+        });
+        (100.0 * (c / n).sqrt() / extent, (r / n).sqrt())
+    };
+    let (centre_pct, rotation_deg) = rmse(trained);
+    let (initial_centre_pct, initial_rotation_deg) = rmse(initial);
+    Some(CameraShift {
+        views: trained.len(),
+        centre_pct,
+        rotation_deg,
+        initial_centre_pct,
+        initial_rotation_deg,
+    })
 }
 
 /// Loads the EDI-deblurred image of each training view from `edi_images` (a folder of images

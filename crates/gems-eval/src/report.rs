@@ -350,14 +350,71 @@ fn header_section(html: &mut String, input: &ReportInput) {
          img{{max-width:100%}}</style></head><body>\n<h1>{t}</h1>\n",
         t = esc(&input.title)
     );
-    let _ = writeln!(
-        html,
-        "<p>Initialisation: <b>{}</b>. {} steps, {:.1} s, {} Gaussians.</p>",
-        esc(&m.init),
-        m.steps,
-        m.seconds,
-        m.gaussians
-    );
+    match &m.run {
+        Some(r) => {
+            let _ = writeln!(html, "<h2>What ran</h2>\n<table>");
+            let hold = r
+                .hold
+                .map_or("none".to_owned(), |h| format!("every {h}th view held out"));
+            let memory = r.peak_memory_bytes.map_or("—".to_owned(), |b| {
+                format!("{:.2} GiB", b as f64 / (1u64 << 30) as f64)
+            });
+            let eval = m
+                .eval_seconds
+                .map_or(String::new(), |s| format!(", evaluation {s:.0} s"));
+            for (k, v) in [
+                (
+                    "protocol",
+                    r.protocol
+                        .clone()
+                        .unwrap_or_else(|| "none (gems defaults)".into()),
+                ),
+                ("scene", format!("{} ({})", r.scene.display(), r.dataset)),
+                ("downscale", format!("×{}", r.downscale)),
+                ("hold-out", hold),
+                (
+                    "views",
+                    format!("{} training, {} held out", r.train_views, r.held_out_views),
+                ),
+                ("initialisation", r.init.clone()),
+                (
+                    "schedule",
+                    format!(
+                        "{} steps, {} virtual views per exposure",
+                        r.steps, r.virtual_views
+                    ),
+                ),
+                ("device", r.device.clone()),
+                (
+                    "wall time",
+                    format!("{:.0} s initialisation and training{eval}", r.wall_seconds),
+                ),
+                ("peak memory", memory),
+            ] {
+                let _ = writeln!(
+                    html,
+                    "<tr><th style=\"text-align:left\">{k}</th><td style=\"text-align:left\">{}</td></tr>",
+                    esc(&v)
+                );
+            }
+            let _ = writeln!(
+                html,
+                "</table>\n<p>Trained from <b>{}</b>; {} Gaussians at the end.</p>",
+                esc(&m.init),
+                m.gaussians
+            );
+        }
+        None => {
+            let _ = writeln!(
+                html,
+                "<p>Initialisation: <b>{}</b>. {} steps, {:.1} s, {} Gaussians.</p>",
+                esc(&m.init),
+                m.steps,
+                m.seconds,
+                m.gaussians
+            );
+        }
+    }
 }
 
 /// The interactive WebGL2 view (also written alone as `viewer.html`), when there is one.
@@ -393,27 +450,37 @@ fn metrics_section(html: &mut String, m: &MetricsReport) {
         html.push_str("<p>LPIPS is absent (—): no LPIPS weights were given.</p>\n");
     }
     html.push_str("<h2>Metrics</h2>\n");
-    split_table(
-        html,
-        "Blurry input (training images vs their sharp ground truth)",
-        &m.input,
-    );
-    split_table(
-        html,
-        "Deblurring (training views at trajectory midpoint)",
-        &m.deblur,
-    );
-    split_table(
-        html,
-        "Deblurring (test-time pose refinement from the initial pose, as the GeMS authors evaluate)",
-        &m.deblur_refined,
-    );
-    split_table(html, "Novel views (test-time pose refinement)", &m.nvs);
-    split_table(
-        html,
-        "Novel views (initial poses, no refinement)",
-        &m.nvs_no_pose_opt,
-    );
+    if let Some(p) = &m.held_out_pose {
+        let _ = writeln!(
+            html,
+            "<p>Held-out views are posed at {}.</p>",
+            esc(&p.describe())
+        );
+    }
+    for (key, label) in crate::metrics::split_labels() {
+        let split = match key {
+            "input" => &m.input,
+            "deblur" => &m.deblur,
+            "deblur_refined" => &m.deblur_refined,
+            "nvs_no_pose_opt" => &m.nvs_no_pose_opt,
+            _ => &m.nvs,
+        };
+        let mut label = label.to_owned();
+        if let Some(first) = label.get_mut(0..1) {
+            first.make_ascii_uppercase();
+        }
+        split_table(html, &label, split);
+    }
+    if let Some(c) = &m.camera_shift {
+        let _ = writeln!(
+            html,
+            "<h3>How far training moved the cameras</h3><p>The {} trained mid-exposure cameras \
+             against the held-out views' pose source's cameras of the same views, after the \
+             similarity: centres {:.2} % of their extent (RMSE), rotations {:.3}° (RMSE). The \
+             initial cameras: {:.2} %, {:.3}°.</p>",
+            c.views, c.centre_pct, c.rotation_deg, c.initial_centre_pct, c.initial_rotation_deg
+        );
+    }
     match &m.ape {
         Some(a) => {
             let _ = writeln!(

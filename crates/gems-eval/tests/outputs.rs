@@ -42,6 +42,24 @@ fn scores_and_split_means() {
     assert!(s1.psnr > 30.0 && s1.psnr.is_finite());
 }
 
+fn run_description() -> gems_train::RunDescription {
+    gems_train::RunDescription {
+        protocol: Some("deblur-nerf-real".into()),
+        scene: "blurball".into(),
+        dataset: "Deblur-NeRF / LLFF".into(),
+        downscale: 4,
+        hold: Some(7),
+        train_views: 23,
+        held_out_views: 4,
+        init: "the dataset's COLMAP model".into(),
+        steps: 7000,
+        virtual_views: 15,
+        device: "cpu (2 threads)".into(),
+        wall_seconds: 95.0,
+        peak_memory_bytes: Some(3 << 29),
+    }
+}
+
 #[test]
 fn metrics_json_round_trip_and_keys() {
     let dir = tempfile::tempdir().unwrap();
@@ -82,6 +100,23 @@ fn metrics_json_round_trip_and_keys() {
         seconds: 12.5,
         gaussians: 1234,
         init: "gt-noisy".into(),
+        labels: split_labels()
+            .into_iter()
+            .map(|(k, v)| (k.to_owned(), v.to_owned()))
+            .collect(),
+        held_out_pose: Some(HeldOutPosing {
+            source: "the dataset's poses (its COLMAP model)".into(),
+            similarity_cameras: 23,
+        }),
+        camera_shift: Some(CameraShift {
+            views: 23,
+            centre_pct: 0.5,
+            rotation_deg: 0.25,
+            initial_centre_pct: 0.0,
+            initial_rotation_deg: 0.0,
+        }),
+        run: Some(run_description()),
+        eval_seconds: Some(3.5),
     };
     let path = dir.path().join("metrics.json");
     write_metrics_json(&path, &report).unwrap();
@@ -100,9 +135,24 @@ fn metrics_json_round_trip_and_keys() {
         "steps",
         "seconds",
         "gaussians",
+        "labels",
+        "held_out_pose",
+        "camera_shift",
+        "run",
     ] {
         assert!(v.get(key).is_some(), "missing key {key}");
     }
+    // Every split is labelled with what it measures.
+    for key in [
+        "input",
+        "deblur",
+        "deblur_refined",
+        "nvs",
+        "nvs_no_pose_opt",
+    ] {
+        assert!(v["labels"][key].is_string(), "no label for {key}");
+    }
+    assert_eq!(v["run"]["protocol"], "deblur-nerf-real");
     assert!(v["deblur"]["lpips"].is_null() && v["nvs"].is_null());
     for key in ["psnr", "ssim", "lpips", "per_image"] {
         assert!(v["deblur"].get(key).is_some(), "missing deblur.{key}");
@@ -251,6 +301,14 @@ fn report_writes_html_and_figures() {
         seconds: 1.0,
         gaussians: 5,
         init: "gt-noisy (σ 0.01)".into(),
+        labels: Default::default(),
+        held_out_pose: Some(HeldOutPosing {
+            source: "the dataset's poses (its poses file)".into(),
+            similarity_cameras: 4,
+        }),
+        camera_shift: None,
+        run: Some(run_description()),
+        eval_seconds: Some(2.0),
     };
     let traj: Vec<Vec<[f64; 3]>> = (0..4)
         .map(|v| {
@@ -285,6 +343,23 @@ fn report_writes_html_and_figures() {
             && html.contains("gt-noisy")
             && html.contains("LPIPS is absent")
     );
+    // The report opens with what ran, before any figure.
+    let what_ran = html.find("What ran").expect("a 'What ran' table");
+    assert!(what_ran < html.find("Metrics").unwrap());
+    for needle in [
+        "deblur-nerf-real",
+        "×4",
+        "every 7th view held out",
+        "23 training, 4 held out",
+        "the dataset's COLMAP model",
+        "7000 steps, 15 virtual views",
+        "cpu (2 threads)",
+        "95 s initialisation and training, evaluation 2 s",
+        "1.50 GiB",
+        "poses file), carried into the trained frame by the similarity of 4 training cameras",
+    ] {
+        assert!(html.contains(needle), "report lacks {needle:?}");
+    }
     for f in ["loss.png", "psnr.png", "trajectory.png", "grid.png"] {
         let p = dir.path().join("report").join(f);
         let im = gems_data::load_image(&p).unwrap();

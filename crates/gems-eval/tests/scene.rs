@@ -54,6 +54,7 @@ fn trained_on(scene: &gems_data::Scene, factor: u32, cfg_fov: f64) -> TrainOutpu
         seconds: 0.0,
         steps: 0,
         pose_model: None,
+        run: None,
     }
 }
 
@@ -127,4 +128,51 @@ fn ground_truth_and_held_out_views_from_a_scene() {
             .to_string()
             .contains("no training view")
     );
+}
+
+/// Training moves the whole frame (the gauge is free): the held-out views must follow it. Here
+/// the trained cameras are the reference cameras under a known similarity; every held-out view
+/// is then evaluated at its reference pose under that same similarity, and the cameras moved by
+/// nothing but it.
+#[test]
+fn held_out_views_follow_the_trained_frame_by_the_similarity_of_the_training_cameras() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = gems_synth::SynthConfig {
+        hold: 4,
+        ..gems_synth::SynthConfig::tiny()
+    };
+    gems_synth::generate(&cfg, dir.path()).unwrap();
+    let scene = gems_data::open_scene(dir.path(), &Default::default()).unwrap();
+    let mut out = trained_on(&scene, 1, cfg.fov_x_deg);
+    let sim = gems_math::Sim3 {
+        scale: 1.7,
+        rot: Se3::from(&Pose::from_quaternion([0.8, 0.2, -0.4, 0.1], [0.0; 3])).rot,
+        trans: gems_math::Vector3::new(0.3, -0.2, 0.5),
+    };
+    for v in &mut out.views {
+        v.mid_c2w = Pose::from(&sim.act_c2w(&Se3::from(&v.mid_c2w)));
+    }
+    let data = eval_data_from_scene(&out, &scene).unwrap();
+    let posing = data.held_out_posing.as_ref().unwrap();
+    assert_eq!(posing.source, "the ground-truth poses");
+    assert_eq!(posing.similarity_cameras, out.views.len());
+    assert!(!data.held_out.is_empty());
+    for h in &data.held_out {
+        let s = scene.views.iter().find(|s| s.name == h.name).unwrap();
+        let want = sim.act_c2w(&Se3::from(&s.gt_pose.unwrap()).inverse());
+        assert!(
+            (h.c2w_init.trans - want.trans).norm() < 1e-9
+                && (h.c2w_init.rot - want.rot).norm() < 1e-9,
+            "{}",
+            h.name
+        );
+    }
+    let shift = data.camera_shift.unwrap();
+    assert_eq!(shift.views, out.views.len());
+    assert!(
+        shift.centre_pct < 1e-6 && shift.rotation_deg < 1e-6,
+        "{shift:?}"
+    );
+    // The initial cameras sit where the reference's are, which the similarity moved away.
+    assert!(shift.initial_centre_pct > 1.0, "{shift:?}");
 }

@@ -24,6 +24,7 @@
 
 mod error;
 mod init;
+mod protocol;
 mod run;
 
 pub use error::PipelineError;
@@ -32,4 +33,7 @@ pub use init::{
     EventInit, Init, InitRequest, edi_images, rerun_init_on_renders, reruns_on_renders,
     resolve_init, run_colmap, run_sfm,
 };
-pub use run::{RunOutcome, TrainJob, TrainRequest, attach_edi, train_and_report, train_scene};
+pub use protocol::{Headline, Protocol, ProtocolSettings};
+pub use run::{
+    RunOutcome, TrainJob, TrainRequest, attach_edi, describe_run, train_and_report, train_scene,
+};

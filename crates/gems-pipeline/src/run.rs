@@ -38,6 +38,9 @@ pub struct TrainRequest {
     pub engine: Engine,
     /// Draw indicatif progress bars on stderr.
     pub progress: bool,
+    /// The published protocol the request was made for (recorded in the outputs; its settings
+    /// are the caller's to apply, [`crate::Protocol::settings`]).
+    pub protocol: Option<crate::Protocol>,
 }
 
 /// One training run from an already resolved initialisation, and what to do after it.
@@ -55,6 +58,11 @@ pub struct TrainJob<'a> {
     pub engine: Engine,
     /// Draw indicatif progress bars on stderr.
     pub progress: bool,
+    /// What the user ran, recorded in the result with the wall time since `started` and the
+    /// peak memory filled in when training ends (`None`: not recorded).
+    pub run: Option<gems_train::RunDescription>,
+    /// When the whole run began (initialisation included).
+    pub started: Instant,
 }
 
 /// What a run wrote.
@@ -72,6 +80,7 @@ pub struct RunOutcome {
 /// initialisation (the focal for the SfM or COLMAP from the request, else from the photos'
 /// EXIF), then trains, exports, evaluates and reports ([`train_and_report`]).
 pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
+    let started = Instant::now();
     req.cfg.validate().map_err(PipelineError::Config)?;
     let scene = gems_data::open_scene(&req.scene, &req.open).map_err(|source| {
         PipelineError::OpenScene {
@@ -99,6 +108,13 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         cfg.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
     }
     let mut engine = req.engine;
+    let mut description = describe_run(
+        &scene,
+        req.protocol,
+        describe_init(&init, &scene),
+        &cfg,
+        &engine,
+    );
     if let Some((first_steps, rest)) = cfg
         .sfm_rerun_split()
         .filter(|_| reruns_on_renders(init.init))
@@ -129,6 +145,8 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                     lpips: &[],
                     engine: Engine::default(),
                     progress: req.progress,
+                    run: None,
+                    started,
                 },
                 engine,
             )?;
@@ -139,6 +157,17 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             let rendered: Vec<String> = first.views.iter().map(|v| v.name.clone()).collect();
             keep_rerun = accept_rerun(second, &mode, &rerun, &rendered)?;
         }
+        description.init = if keep_rerun {
+            format!(
+                "{}, then again on the first pass's sharp renders ({first_steps} + {rest} steps)",
+                description.init
+            )
+        } else {
+            format!(
+                "{} (initialising again on the first pass's renders was tried and not kept)",
+                description.init
+            )
+        };
         if keep_rerun {
             mode = InitMode::Colmap(Some(rerun.join("sparse").join("0")));
             // The run proper has the steps the first pass left, and is itself one pass; its
@@ -159,7 +188,77 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         lpips: &req.lpips,
         engine,
         progress: req.progress,
+        run: Some(description),
+        started,
     })
+}
+
+/// What a run on `scene` is, for its report and `metrics.json` ([`TrainJob::run`]); the wall
+/// time and peak memory are filled in when training ends.
+pub fn describe_run(
+    scene: &gems_data::Scene,
+    protocol: Option<crate::Protocol>,
+    init: String,
+    cfg: &TrainConfig,
+    engine: &Engine,
+) -> gems_train::RunDescription {
+    gems_train::RunDescription {
+        protocol: protocol.map(|p| p.name().to_owned()),
+        scene: scene.root.clone(),
+        dataset: format!("{}, {}", scene.dataset, scene.layout.describe()),
+        downscale: scene.downscale,
+        hold: scene.hold,
+        train_views: scene.train_views().count(),
+        held_out_views: scene.nvs_eval_views().count(),
+        init,
+        steps: cfg.steps,
+        virtual_views: cfg.num_virtual_views,
+        device: engine.describe(),
+        wall_seconds: 0.0,
+        peak_memory_bytes: None,
+    }
+}
+
+/// The initialisation as the user asked for it, in words: the report's "what ran" line.
+fn describe_init(init: &InitRequest, scene: &gems_data::Scene) -> String {
+    let images = if init.events.is_some() {
+        "the EDI-deblurred images (events)"
+    } else {
+        "the blurry photos"
+    };
+    match init.init {
+        Init::Sfm => format!("built-in SfM on {images}"),
+        Init::ColmapCli => format!("COLMAP ({}) on {images}", init.colmap_binary.display()),
+        Init::Colmap => match (&init.colmap_model, &scene.sfm_dir, scene.sfm_match) {
+            (Some(dir), _, _) => format!("the COLMAP model {}", dir.display()),
+            (None, Some(dir), Some(m)) => format!(
+                "the dataset's COLMAP model {} ({} of {} views, images matched {})",
+                dir.display(),
+                m.matched,
+                m.views,
+                m.rule.describe()
+            ),
+            _ => match scene.pose_source {
+                gems_data::PoseSource::Llff => "the dataset's poses file".into(),
+                gems_data::PoseSource::Nerfstudio => "the dataset's transforms file".into(),
+                _ => "the dataset's poses".into(),
+            },
+        },
+        Init::Gt => "ground-truth poses".into(),
+        Init::GtNoisy => format!(
+            "ground-truth poses with noise (σ {} translation, {} rad rotation)",
+            init.noise_translation, init.noise_rotation
+        ),
+    }
+}
+
+/// The process's peak resident memory (Linux `/proc/self/status` `VmHWM`), bytes; `None`
+/// elsewhere.
+fn peak_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 /// Whether the model initialised on the first pass's renders replaces the first one: when the
@@ -290,6 +389,11 @@ fn train_and_export(
     train_with_checkpoints(&mut trainer, job.output, job.progress)?;
     let mut output = TrainOutput::from_trainer(&trainer);
     output.pose_model = pose_model;
+    output.run = job.run.clone().map(|mut run| {
+        run.wall_seconds = job.started.elapsed().as_secs_f64();
+        run.peak_memory_bytes = peak_memory_bytes();
+        run
+    });
     output.save(job.output)?;
     let ply = job.output.join("point_cloud.ply");
     let g_input = output
@@ -407,6 +511,7 @@ fn evaluate_and_report(
     } else {
         Some(gems_metrics::Lpips::load(job.lpips)?)
     };
+    let eval_started = Instant::now();
     let bar = progress_bar(
         job.progress,
         gems_eval::evaluation_units(&data),
@@ -421,6 +526,8 @@ fn evaluate_and_report(
         &mut |_view| bar.inc(1),
     )?;
     bar.finish();
+    let mut eval = eval;
+    eval.metrics.eval_seconds = Some(eval_started.elapsed().as_secs_f64());
     gems_eval::write_metrics_json(&job.output.join("metrics.json"), &eval.metrics)?;
     gems_eval::write_trajectories(job.output, output)?;
     gems_eval::write_renders_on(engine, job.output, output, &data, &eval)?;

@@ -21,6 +21,7 @@ fn request(scene: &std::path::Path, output: &std::path::Path, init: InitRequest)
         lpips: Vec::new(),
         engine: Engine::cpu(),
         progress: false,
+        protocol: None,
     }
 }
 
@@ -65,6 +66,27 @@ fn tiny_scene_end_to_end_from_rust() {
         metrics.ape_init.unwrap().rmse < 1e-9,
         "{:?}",
         metrics.ape_init
+    );
+    // The result says what ran, and how the held-out views were posed.
+    let what = metrics.run.as_ref().expect("a run description");
+    assert_eq!(what.init, "ground-truth poses");
+    assert_eq!(
+        (what.steps, what.downscale, what.protocol.as_deref()),
+        (20, 1, None)
+    );
+    assert_eq!(what.train_views, deblur.per_image.len());
+    assert!(
+        what.wall_seconds > 0.0 && what.device.starts_with("CPU"),
+        "{what:?}"
+    );
+    let posing = metrics.held_out_pose.as_ref().expect("held-out posing");
+    assert_eq!(posing.source, "the ground-truth poses");
+    assert_eq!(posing.similarity_cameras, what.train_views);
+    assert!(metrics.eval_seconds.is_some_and(|s| s > 0.0));
+    assert!(
+        std::fs::read_to_string(&report)
+            .unwrap()
+            .contains("What ran")
     );
 }
 

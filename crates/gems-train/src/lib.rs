@@ -53,7 +53,7 @@ pub use config::{
 };
 pub use init::{PointCloud, from_points, random_in_frustums};
 pub use normalize::Normalization;
-pub use output::{MODEL_JSON, MODEL_TENSORS, TrainOutput, ViewResult};
+pub use output::{MODEL_JSON, MODEL_TENSORS, RunDescription, TrainOutput, ViewResult};
 pub use prepare::{InitMode, prepare_input};
 pub use trainer::{History, StepReport, TrainInput, TrainState, TrainView, Trainer, trajectory_of};
 

@@ -34,6 +34,39 @@ pub struct ViewResult {
     pub mid_c2w: Pose,
 }
 
+/// What the user ran, as the report and `metrics.json` open with: the protocol, the data, the
+/// initialisation, the schedule, the device and what it cost. Filled by the pipeline that ran
+/// the whole job (training alone knows none of it).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunDescription {
+    /// The published protocol the run follows by name (`--protocol`), if any.
+    pub protocol: Option<String>,
+    /// The scene folder.
+    pub scene: PathBuf,
+    /// The dataset the folder looks like, and its layout.
+    pub dataset: String,
+    /// Image downscale factor.
+    pub downscale: u32,
+    /// Hold-out interval (`None`: none).
+    pub hold: Option<i64>,
+    /// Training views and held-out views with a sharp image.
+    pub train_views: usize,
+    pub held_out_views: usize,
+    /// The initialisation as the user asked for it, and what it gave (e.g. "built-in SfM on the
+    /// blurry photos, then again on the first pass's renders").
+    pub init: String,
+    /// Steps in all (a first pass and the run proper together).
+    pub steps: usize,
+    /// Virtual views per exposure.
+    pub virtual_views: usize,
+    /// The splatting engine's device.
+    pub device: String,
+    /// Wall time from opening the scene to the end of training (initialisation included), s.
+    pub wall_seconds: f64,
+    /// The process's peak resident memory at the end of training, bytes (Linux `VmHWM`).
+    pub peak_memory_bytes: Option<u64>,
+}
+
 /// What training produces; gems-eval renders, measures and exports from it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrainOutput {
@@ -51,6 +84,8 @@ pub struct TrainOutput {
     /// The COLMAP model the initial poses came from, if any. Held-out views are evaluated from
     /// its poses (through the same normalisation), never from poses of another frame.
     pub pose_model: Option<PathBuf>,
+    /// What the user ran (`None` for results of older versions or of a bare trainer).
+    pub run: Option<RunDescription>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -68,6 +103,8 @@ struct OutputMeta {
     steps: usize,
     #[serde(default)]
     pose_model: Option<PathBuf>,
+    #[serde(default)]
+    run: Option<RunDescription>,
 }
 
 pub const MODEL_TENSORS: &str = "model.safetensors";
@@ -109,6 +146,7 @@ impl TrainOutput {
             seconds: t.state.seconds,
             steps: t.state.step,
             pose_model: None,
+            run: None,
         }
     }
 
@@ -140,6 +178,7 @@ impl TrainOutput {
             seconds: self.seconds,
             steps: self.steps,
             pose_model: self.pose_model.clone(),
+            run: self.run.clone(),
         };
         Ok(gems_fs::write_atomic(
             &dir.join(MODEL_JSON),
@@ -181,6 +220,7 @@ impl TrainOutput {
             seconds: meta.seconds,
             steps: meta.steps,
             pose_model: meta.pose_model,
+            run: meta.run,
         })
     }
 }

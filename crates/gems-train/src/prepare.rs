@@ -29,7 +29,8 @@ use crate::trainer::{TrainInput, TrainView};
 /// Where the initial poses (and points) come from.
 #[derive(Clone, Debug, PartialEq)]
 pub enum InitMode {
-    /// A COLMAP model: the scene's own (`None`) or the one at this folder.
+    /// A COLMAP model at this folder, or (`None`) the scene's own poses: its COLMAP model, else
+    /// its poses file (`poses_bounds.npy`, `transforms.json`; points then start at random).
     Colmap(Option<PathBuf>),
     /// Ground-truth poses.
     Gt,
@@ -44,7 +45,7 @@ impl InitMode {
     /// Label recorded in the output and shown in the report.
     pub fn label(&self) -> String {
         match self {
-            InitMode::Colmap(None) => "colmap (scene sparse model)".into(),
+            InitMode::Colmap(None) => "colmap (the scene's own model or poses)".into(),
             InitMode::Colmap(Some(p)) => format!("colmap ({})", p.display()),
             InitMode::Gt => "gt (ground-truth poses)".into(),
             InitMode::GtNoisy {
@@ -188,20 +189,29 @@ fn initial_model(scene: &Scene, mode: &InitMode) -> Result<Option<SparseModel>, 
             );
             Some(model)
         }
-        InitMode::Colmap(None) => Some(scene.sfm.clone().ok_or_else(|| {
-            let why = match scene.sfm_match {
-                Some(m) => format!(
-                    "its COLMAP model names none of its {} views (by file name, stem or sorted \
-                     order)",
-                    m.views
-                ),
-                None => "no sparse model".to_owned(),
-            };
-            TrainError::Input(format!(
-                "{}: {why} (run `gems sfm`, pass --colmap-model, or use --init sfm)",
-                scene.root.display()
-            ))
-        })?),
+        InitMode::Colmap(None) => match &scene.sfm {
+            Some(model) => Some(model.clone()),
+            None if scene.pose_source != gems_data::PoseSource::None => {
+                tracing::info!(
+                    "the scene has poses but no COLMAP model: its poses, and points at random"
+                );
+                None
+            }
+            None => {
+                let why = match scene.sfm_match {
+                    Some(m) => format!(
+                        "its COLMAP model names none of its {} views (by file name, stem or \
+                         sorted order)",
+                        m.views
+                    ),
+                    None => "no COLMAP model and no poses".to_owned(),
+                };
+                return Err(TrainError::Input(format!(
+                    "{}: {why} (run `gems sfm`, pass --colmap-model, or use --init sfm)",
+                    scene.root.display()
+                )));
+            }
+        },
         InitMode::Gt | InitMode::GtNoisy { .. } => {
             let gt_dir = scene.root.join("gt").join("sparse").join("0");
             if gt_dir.is_dir() {

@@ -174,6 +174,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 lpips: Vec::new(),
                 engine: super::open_engine(args.device)?,
                 progress: true,
+                protocol: None,
             });
             match run {
                 Ok(_) => {

@@ -91,6 +91,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         scene.display()
     );
 
+    let started = std::time::Instant::now();
     let mode = if args.gt_noisy {
         gt_noisy()
     } else {
@@ -132,6 +133,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("invalid demo configuration: {e}"))?;
     tracing::info!(steps = cfg.steps, init = %mode.label(), "3/3 training and evaluation");
+    let engine = super::open_engine(args.device)?;
+    let init = match &mode {
+        InitMode::Colmap(_) if args.events => "built-in SfM on the EDI-deblurred images (events)",
+        InitMode::Colmap(_) => "built-in SfM on the blurry photos",
+        _ => "ground-truth poses with noise (the built-in SfM was not used)",
+    };
+    let opened = gems_data::open_scene(&scene, &gems_data::OpenOptions::default())?;
+    let description = gems_pipeline::describe_run(&opened, None, init.into(), &cfg, &engine);
     let run = train_and_report(TrainJob {
         scene: &scene,
         output: &out.join("train"),
@@ -141,8 +150,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         resume: false,
         evaluate: true,
         lpips: &[],
-        engine: super::open_engine(args.device)?,
+        engine,
         progress: true,
+        run: Some(description),
+        started,
     })?;
     let (Some(report), Some(metrics)) = (run.report, run.metrics) else {
         anyhow::bail!("evaluation produced no report");

@@ -20,9 +20,14 @@ pub struct Args {
     /// reported as absent.
     #[arg(long, num_args = 1..)]
     pub lpips: Vec<PathBuf>,
-    /// Hold-out interval overriding the scene's `hold=<n>` marker (as used for training).
+    /// Hold-out interval overriding the scene's `hold=<n>` marker (default: the one training
+    /// used, else the protocol's).
     #[arg(long)]
     pub hold: Option<i64>,
+    /// The published protocol to report the figures under (default: the one training ran
+    /// with); see `gems train --help`.
+    #[arg(long, value_enum)]
+    pub protocol: Option<gems_pipeline::Protocol>,
     /// Folder for downscaled copies the scene lacks (default: `<output>/cache`, as in training).
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
@@ -46,7 +51,8 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let output = gems_train::TrainOutput::load(&args.output).with_context(|| {
+    let started = std::time::Instant::now();
+    let mut output = gems_train::TrainOutput::load(&args.output).with_context(|| {
         format!(
             "cannot read the trained result in {}",
             args.output.display()
@@ -56,8 +62,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .cache_dir
         .clone()
         .unwrap_or_else(|| args.output.join("cache"));
+    let protocol_hold = args.protocol.and_then(|p| p.settings(&args.scene).hold);
+    let recorded_hold = output.run.as_ref().and_then(|r| r.hold);
+    if let (Some(p), Some(run)) = (args.protocol, output.run.as_mut()) {
+        run.protocol = Some(p.name().to_owned());
+    }
     let opts = gems_data::OpenOptions {
-        hold: args.hold,
+        hold: args.hold.or(protocol_hold).or(recorded_hold),
         cache_dir: Some(cache),
         time_unit: args.time_unit,
         ..Default::default()
@@ -98,6 +109,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
     )?;
     bar.finish_and_clear();
+    let mut eval = eval;
+    eval.metrics.eval_seconds = Some(started.elapsed().as_secs_f64());
     write_metrics_json(&args.output.join("metrics.json"), &eval.metrics)?;
     write_trajectories(&args.output, &output)?;
     gems_eval::write_renders_on(&mut engine, &args.output, &output, &data, &eval)?;
@@ -105,35 +118,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &args.output,
         &gems_eval::report_input(&output, &data, &eval, args.grid_rows),
     )?;
-    let fmt = |s: &Option<gems_eval::SplitScores>| {
-        s.as_ref().map_or_else(
-            || "n/a".to_owned(),
-            |s| {
-                let lpips = s
-                    .lpips
-                    .map_or_else(|| "absent".to_owned(), |l| format!("{l:.4}"));
-                format!("PSNR {:.2} SSIM {:.4} LPIPS {lpips}", s.psnr, s.ssim)
-            },
-        )
-    };
-    println!("input:           {}", fmt(&eval.metrics.input));
-    println!("deblur:          {}", fmt(&eval.metrics.deblur));
-    println!("deblur_refined:  {}", fmt(&eval.metrics.deblur_refined));
-    println!("nvs:             {}", fmt(&eval.metrics.nvs));
-    println!("nvs_no_pose_opt: {}", fmt(&eval.metrics.nvs_no_pose_opt));
-    match eval.metrics.ape {
-        Some(a) => println!(
-            "APE rmse {:.5} mean {:.5} median {:.5} std {:.5} max {:.5}",
-            a.rmse, a.mean, a.median, a.std, a.max
-        ),
-        None => println!("APE: n/a (no ground-truth poses)"),
-    }
-    if let Some(a) = eval.metrics.ape_init {
-        println!("APE of the initial poses: rmse {:.5}", a.rmse);
-    }
-    if let Some(line) = super::rotation_error_line(&eval.metrics) {
-        println!("{line}");
-    }
+    super::print_splits(&eval.metrics);
     println!("report: {}", report.display());
     Ok(())
 }

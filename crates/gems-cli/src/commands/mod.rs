@@ -28,16 +28,48 @@ pub fn open_engine(device: DeviceChoice) -> anyhow::Result<Engine> {
 /// One line per split a run evaluated (PSNR and SSIM), and the camera-centre APE of the initial
 /// and the trained poses when the scene has ground truth.
 pub fn print_splits(m: &gems_eval::MetricsReport) {
+    if let Some(r) = &m.run {
+        println!(
+            "protocol: {}; ×{}, {} training and {} held-out views; {}; {} steps; {}",
+            r.protocol.as_deref().unwrap_or("gems defaults"),
+            r.downscale,
+            r.train_views,
+            r.held_out_views,
+            r.init,
+            r.steps,
+            r.device
+        );
+    }
+    let reference = m
+        .held_out_pose
+        .as_ref()
+        .map_or("initial pose".to_owned(), |p| {
+            p.source.trim_start_matches("the ").to_owned()
+        });
     for (label, split) in [
         ("blurry input", &m.input),
-        ("deblur (trajectory midpoint)", &m.deblur),
-        ("deblur (pose refined, GeMS protocol)", &m.deblur_refined),
-        ("novel views (pose refined)", &m.nvs),
-        ("novel views (initial pose)", &m.nvs_no_pose_opt),
+        ("deblur, at the trajectory midpoint", &m.deblur),
+        ("deblur, pose refined (GeMS protocol)", &m.deblur_refined),
+        (
+            &format!("novel views, at {reference}") as &str,
+            &m.nvs_no_pose_opt,
+        ),
+        ("novel views, pose refined from there", &m.nvs),
     ] {
         if let Some(s) = split {
-            println!("{label}: PSNR {:.2} dB, SSIM {:.4}", s.psnr, s.ssim);
+            let lpips = s.lpips.map_or(String::new(), |l| format!(", LPIPS {l:.4}"));
+            println!("{label}: PSNR {:.2} dB, SSIM {:.4}{lpips}", s.psnr, s.ssim);
         }
+    }
+    if let Some(p) = &m.held_out_pose {
+        println!("held-out views posed at {}", p.describe());
+    }
+    if let Some(c) = &m.camera_shift {
+        println!(
+            "trained cameras vs that source's: centres {:.2} % of their extent, rotations {:.3}° \
+             (initial cameras {:.2} %, {:.3}°)",
+            c.centre_pct, c.rotation_deg, c.initial_centre_pct, c.initial_rotation_deg
+        );
     }
     if let Some(a) = &m.ape {
         let init = m
