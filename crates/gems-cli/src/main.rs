@@ -41,6 +41,10 @@ enum Command {
     /// Quality benchmark: GeMS from the built-in SfM and from ground-truth poses against the
     /// blurry input and the sharp-input ceiling, on generated scenes of several seeds.
     BenchQuality(commands::bench_quality::Args),
+    /// Real-data benchmark on a scene folder under a published protocol: naive 3DGS and gems
+    /// from the dataset's poses, gems from the built-in SfM (and GeMS-E with events), held-out
+    /// views at the dataset's pose and refined, wall time, peak memory.
+    BenchReal(commands::bench_real::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -56,6 +60,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Demo(a) => commands::demo::run(a),
         Command::BenchQuality(a) => commands::bench_quality::run(a),
+        Command::BenchReal(a) => commands::bench_real::run(a),
         Command::Render(a) => commands::render::run(a),
         Command::Info(a) => commands::info::run(a),
         Command::Synth(a) => commands::synth::run(a),

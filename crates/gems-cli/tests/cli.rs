@@ -269,7 +269,7 @@ fn stdout(out: &Output) -> String {
 
 /// A Deblur-NeRF real scene as redistributed, made from a generated one at 4× the training size:
 /// JPG `images/`, PNG `images_4/` with the same stems, `poses_bounds.npy`, `sparse/0` (naming the
-/// JPGs) and `hold=7`.
+/// PNGs, as `Dojizz/NGP-Deblur-NeRF:blurball/sparse/0` does) and `hold=7`.
 fn deblur_nerf_real(dir: &Path) -> PathBuf {
     let synth = dir.join("synth");
     ok(&gems(&[
@@ -298,10 +298,8 @@ fn deblur_nerf_real(dir: &Path) -> PathBuf {
         real.join("poses_bounds.npy"),
     )
     .unwrap();
-    let mut model = gems_data::colmap::read_model(&synth.join("gt/sparse/0")).unwrap();
-    for im in &mut model.images {
-        im.name = im.name.replace(".png", ".jpg");
-    }
+    let model = gems_data::colmap::read_model(&synth.join("gt/sparse/0")).unwrap();
+    assert!(model.images.iter().all(|im| im.name.ends_with(".png")));
     gems_data::colmap::write_model(
         &real.join("sparse/0"),
         &model,
@@ -325,6 +323,10 @@ fn deblur_nerf_real_trains_read_only_with_colmap_at_downscale_4() {
     let text = stdout(&info);
     assert!(
         text.contains("Deblur-NeRF / LLFF") && text.contains("sparse/0: COLMAP model"),
+        "{text}"
+    );
+    assert!(
+        text.contains("views posed by it, images matched by file stem"),
         "{text}"
     );
     assert!(
@@ -378,7 +380,7 @@ fn deblur_nerf_real_trains_read_only_with_colmap_at_downscale_4() {
         "--colmap",
         s(&real.join("sparse/0")),
         "--image",
-        "001.jpg",
+        "001.png",
     ]));
     ok(&gems(&["sfm", s(&real), "-o", s(&dir.path().join("sfm"))]));
     // No events: one clear error, still nothing written into the scene.
@@ -933,4 +935,78 @@ fn bench_quality_runs_only_the_rows_asked_for() {
     let other = dir.path().join("other");
     let bad = gems(&["bench-quality", "-o", s(&other), "--rows", "sfm,sharp"]);
     fails_clearly(&bad, "invalid value 'sharp' for '--rows");
+}
+
+#[test]
+fn bench_real_runs_the_rows_under_the_protocol_and_reads_finished_rows_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let real = deblur_nerf_real(dir.path());
+    read_only(&real);
+    let before = snapshot(&real);
+    let out = dir.path().join("bench");
+    let args = [
+        "bench-real",
+        s(&real),
+        "-o",
+        s(&out),
+        "--rows",
+        "naive,dataset",
+        "--steps",
+        "10",
+        "--device",
+        "cpu",
+    ];
+    let run = gems(&args);
+    ok(&run);
+    assert_eq!(
+        snapshot(&real),
+        before,
+        "the benchmark wrote into the scene"
+    );
+    let table = std::fs::read_to_string(out.join("bench.md")).unwrap();
+    assert!(
+        table.contains("protocol deblur-nerf-real at ×4, 10 steps"),
+        "{table}"
+    );
+    assert!(
+        table.contains("naive 3DGS (n = 1), dataset's poses")
+            && table.contains("gems, dataset's poses"),
+        "{table}"
+    );
+    assert!(
+        table.contains("the dataset's poses (its COLMAP model), carried into the trained frame"),
+        "{table}"
+    );
+    let rows: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("bench.json")).unwrap()).unwrap();
+    assert_eq!(rows.as_array().unwrap().len(), 2);
+    for r in rows.as_array().unwrap() {
+        assert!(r["at_dataset_pose"]["psnr"].as_f64().unwrap() > 5.0, "{r}");
+        assert!(r["refined"]["psnr"].as_f64().is_some(), "{r}");
+        assert!(r["peak_memory_gib"].as_f64().unwrap() > 0.0, "{r}");
+        assert!(r["wall_seconds"].as_f64().unwrap() > 0.0, "{r}");
+    }
+    for (row, n) in [("naive", 1), ("dataset", 15)] {
+        let m = gems_eval::read_metrics_json(&out.join(row).join("metrics.json")).unwrap();
+        let what = m.run.unwrap();
+        assert_eq!(what.protocol.as_deref(), Some("deblur-nerf-real"));
+        assert_eq!((what.downscale, what.hold, what.steps), (4, Some(7), 10));
+        assert_eq!(what.virtual_views, n);
+        assert!(
+            what.init.starts_with("the dataset's COLMAP model"),
+            "{}",
+            what.init
+        );
+        assert!(what.init.contains("by file stem"), "{}", what.init);
+    }
+    // A second run reads the finished rows instead of training again.
+    let again = gems(&args);
+    ok(&again);
+    assert_eq!(
+        std::fs::read_to_string(out.join("bench.md")).unwrap(),
+        table
+    );
+    // A bad device is one clear error before anything runs.
+    let bad = gems(&["bench-real", s(&real), "-o", s(&out), "--device", "tpu"]);
+    fails_clearly(&bad, "--device tpu");
 }

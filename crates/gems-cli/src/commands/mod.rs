@@ -2,6 +2,7 @@
 //! arguments, calls the libraries (a whole run: gems-pipeline), and prints. The two helpers here
 //! are what several commands print the same way.
 pub mod bench_quality;
+pub mod bench_real;
 pub mod demo;
 pub mod edi;
 pub mod eval;
