@@ -22,6 +22,8 @@
 //!   degrees, no alignment needed), which sees the cameras' orientation that APE's centres do
 //!   not. The result serialises to `metrics.json`
 //!   ([`MetricsReport`], [`write_metrics_json`]).
+//! - [`export`]: the trained cameras out, as a COLMAP model (with the Gaussians' centres as
+//!   points) or a nerfstudio `transforms.json` with the sharp renders, in the input frame.
 //! - [`tum`]: TUM trajectory files; [`write_trajectories`] writes every view's n virtual poses
 //!   plus the midpoints (and ground truth when known), in the input frame.
 //! - [`report`]: `report.html` with loss/PSNR curves, a trajectory plot and a
@@ -40,6 +42,7 @@
 //! ```
 
 pub mod browser;
+pub mod export;
 mod metrics;
 mod protocol;
 pub mod refine;

@@ -257,7 +257,7 @@ pub fn file_stem(name: &str) -> String {
         .collect()
 }
 
-fn to_input_frame(output: &TrainOutput, c2w: &Se3) -> Se3 {
+pub(crate) fn to_input_frame(output: &TrainOutput, c2w: &Se3) -> Se3 {
     let (r, t) = output.normalization.invert_c2w(&c2w.rot, &c2w.trans);
     Se3::new(r, t)
 }

@@ -176,3 +176,82 @@ fn held_out_views_follow_the_trained_frame_by_the_similarity_of_the_training_cam
     // The initial cameras sit where the reference's are, which the similarity moved away.
     assert!(shift.initial_centre_pct > 1.0, "{shift:?}");
 }
+
+/// The trained cameras leave as a COLMAP model and a nerfstudio transforms file in the scene's
+/// input frame: read back, each photo's camera is its trained mid-exposure one (here the scene's
+/// own poses, trained in a normalised frame), and the Gaussians' centres are the points.
+#[test]
+fn cameras_export_as_colmap_and_nerfstudio_and_read_back_in_the_input_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = gems_synth::SynthConfig::tiny();
+    gems_synth::generate(&cfg, dir.path()).unwrap();
+    let scene = gems_data::open_scene(dir.path(), &Default::default()).unwrap();
+    let mut out = trained_on(&scene, 1, cfg.fov_x_deg);
+    // Train "in" a normalised frame: the result's poses and Gaussians are normalised, the
+    // export must undo it.
+    let c2w: Vec<_> = out
+        .views
+        .iter()
+        .map(|v| {
+            let s = Se3::from(&v.mid_c2w);
+            (s.rot, s.trans)
+        })
+        .collect();
+    out.normalization = Normalization::from_cameras(&c2w, 0.25);
+    for v in &mut out.views {
+        let s = Se3::from(&v.mid_c2w);
+        let (r, t) = out.normalization.apply_c2w(&s.rot, &s.trans);
+        v.mid_c2w = Pose::from(&Se3::new(r, t));
+    }
+    let input_means = out.gaussians.means.clone();
+    for m in &mut out.gaussians.means {
+        let p = out
+            .normalization
+            .apply_point(&gems_math::Vector3::from(m.map(f64::from)));
+        *m = [p.x as f32, p.y as f32, p.z as f32];
+    }
+    let close = |a: &Pose, b: &Pose| {
+        let (a, b) = (Se3::from(a), Se3::from(b));
+        (a.rot - b.rot).norm() < 1e-6 && (a.trans - b.trans).norm() < 1e-5
+    };
+    let scene_pose = |name: &str| {
+        let v = scene.views.iter().find(|v| v.name == name).unwrap();
+        v.pose.or(v.gt_pose).unwrap()
+    };
+
+    let colmap_dir = dir.path().join("export_colmap");
+    export::write_colmap_export(&colmap_dir, &out).unwrap();
+    let model = gems_data::colmap::read_model(&colmap_dir.join("sparse/0")).unwrap();
+    assert_eq!(model.images.len(), out.views.len());
+    assert_eq!(
+        model.cameras.len(),
+        1,
+        "one camera for views that share intrinsics"
+    );
+    for img in &model.images {
+        assert!(close(&img.pose(), &scene_pose(&img.name)), "{}", img.name);
+        let k = model.camera(img.camera_id).unwrap().intrinsics().unwrap();
+        assert_eq!(k, out.views[0].intrinsics);
+    }
+    assert_eq!(model.points.len(), input_means.len());
+    for (p, m) in model.points.iter().zip(&input_means) {
+        for c in 0..3 {
+            assert!((p.xyz[c] - f64::from(m[c])).abs() < 1e-4, "{p:?} vs {m:?}");
+        }
+    }
+    assert!(colmap_dir.join("trajectories/mid.txt").is_file());
+
+    let ns_dir = dir.path().join("export_nerfstudio");
+    export::write_nerfstudio_export(&ns_dir, &mut gems_gpu::Engine::cpu(), &out).unwrap();
+    let t = gems_data::nerfstudio::read_transforms(&ns_dir.join("transforms.json")).unwrap();
+    assert_eq!(t.frames.len(), out.views.len());
+    for (f, v) in t.frames.iter().zip(&out.views) {
+        assert!(close(&f.pose, &scene_pose(&v.name)), "{}", v.name);
+        let img = gems_data::load_image(&ns_dir.join(&f.file_path)).unwrap();
+        assert_eq!(
+            (img.width, img.height),
+            (v.intrinsics.width, v.intrinsics.height)
+        );
+        assert_eq!(f.camera.resolve(img.width, img.height), v.intrinsics);
+    }
+}
