@@ -1010,3 +1010,54 @@ fn bench_real_runs_the_rows_under_the_protocol_and_reads_finished_rows_back() {
     let bad = gems(&["bench-real", s(&real), "-o", s(&out), "--device", "tpu"]);
     fails_clearly(&bad, "--device tpu");
 }
+
+#[test]
+fn bursts_and_camera_exports_from_a_trained_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let out = dir.path().join("run");
+    ok(&train(
+        &scene,
+        &out,
+        &[
+            "--init",
+            "gt",
+            "--steps",
+            "10",
+            "--no-eval",
+            "--device",
+            "cpu",
+        ],
+    ));
+    let trained = gems_train::TrainOutput::load(&out).unwrap();
+    let n = trained.config.num_virtual_views;
+    ok(&gems(&["render", s(&out), "--bursts", "--device", "cpu"]));
+    for v in &trained.views {
+        let stem = Path::new(&v.name).file_stem().unwrap().to_str().unwrap();
+        let frames = std::fs::read_dir(out.join("bursts").join(stem))
+            .unwrap()
+            .count();
+        assert_eq!(frames, n, "{stem}");
+        assert!(out.join("bursts").join(format!("{stem}.gif")).is_file());
+    }
+    ok(&gems(&["export", s(&out), "--format", "colmap"]));
+    let model = gems_data::colmap::read_model(&out.join("export_colmap/sparse/0")).unwrap();
+    assert_eq!(model.images.len(), trained.views.len());
+    ok(&gems(&[
+        "export",
+        s(&out),
+        "--format",
+        "nerfstudio",
+        "--device",
+        "cpu",
+    ]));
+    let t = gems_data::nerfstudio::read_transforms(&out.join("export_nerfstudio/transforms.json"))
+        .unwrap();
+    assert_eq!(t.frames.len(), trained.views.len());
+    // A folder without --bursts, or --bursts on a PLY: one clear error each.
+    fails_clearly(&gems(&["render", s(&out), "-o", "x.png"]), "is a folder");
+    fails_clearly(
+        &gems(&["render", s(&out.join("point_cloud.ply")), "--bursts"]),
+        "--bursts needs an output folder",
+    );
+}

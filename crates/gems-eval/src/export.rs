@@ -123,3 +123,117 @@ pub fn write_nerfstudio_export(
     crate::write_trajectories(dir, output)?;
     Ok(transforms)
 }
+
+/// The sharp renders of one training photo's exposure: its n virtual cameras in time order, the
+/// mid-exposure camera, and their mean, the re-blurred photo the training fitted (the blur model
+/// of `gems_train::render_blurred`).
+pub struct ExposureBurst {
+    pub intrinsics: Intrinsics,
+    /// `[H,W,3]` per virtual camera, exposure start to end.
+    pub frames: Vec<Vec<f32>>,
+    pub mid: Vec<f32>,
+    pub reblurred: Vec<f32>,
+}
+
+/// Renders [`ExposureBurst`] of training view `v` (black background, not clamped).
+pub fn render_exposure_burst(
+    engine: &mut Engine,
+    output: &TrainOutput,
+    v: usize,
+) -> Result<ExposureBurst, EvalError> {
+    let view = &output.views[v];
+    let k = view.intrinsics;
+    let cams: Vec<_> = view
+        .virtual_c2w
+        .iter()
+        .chain(std::iter::once(&view.mid_c2w))
+        .map(|p| gems_splat::Camera::from_c2w(&k, &Se3::from(p)))
+        .collect();
+    let out = engine.forward(
+        &output.gaussians,
+        &cams,
+        &vec![[0.0; 3]; cams.len()],
+        &gems_splat::RenderSettings::default(),
+    )?;
+    let px = (k.width * k.height * 3) as usize;
+    let mut frames: Vec<Vec<f32>> = out.rgb.chunks_exact(px).map(<[f32]>::to_vec).collect();
+    let mid = frames.pop().expect("the mid-exposure camera was rendered");
+    let inv_n = 1.0 / frames.len().max(1) as f32;
+    let mut reblurred = vec![0.0f32; px];
+    for f in &frames {
+        for (acc, x) in reblurred.iter_mut().zip(f) {
+            *acc += x * inv_n;
+        }
+    }
+    Ok(ExposureBurst {
+        intrinsics: k,
+        frames,
+        mid,
+        reblurred,
+    })
+}
+
+/// For every training photo, its exposure as a burst of sharp frames: `<dir>/<stem>/<k>.png`
+/// (k = 00 … n−1, exposure start to end), an animated preview `<dir>/<stem>.gif` (the burst
+/// forward then back, 12 frames per second), and `<dir>/<stem>_mid.png`. Returns the number of
+/// photos written.
+pub fn write_bursts(
+    dir: &Path,
+    engine: &mut Engine,
+    output: &TrainOutput,
+    on_view: &mut dyn FnMut(&str),
+) -> Result<usize, EvalError> {
+    for (v, view) in output.views.iter().enumerate() {
+        let burst = render_exposure_burst(engine, output, v)?;
+        let stem = file_stem(&view.name);
+        let k = burst.intrinsics;
+        let image = |data: &[f32]| gems_data::ImageRgb {
+            width: k.width,
+            height: k.height,
+            data: data.to_vec(),
+        };
+        for (i, f) in burst.frames.iter().enumerate() {
+            gems_data::save_png(&dir.join(&stem).join(format!("{i:02}.png")), &image(f))?;
+        }
+        gems_data::save_png(&dir.join(format!("{stem}_mid.png")), &image(&burst.mid))?;
+        let gif = dir.join(format!("{stem}.gif"));
+        gems_fs::write_atomic(&gif, &animated_gif(&burst.frames, k.width, k.height, &gif)?)?;
+        on_view(&view.name);
+    }
+    Ok(output.views.len())
+}
+
+/// A looping GIF of `frames` (`[H,W,3]` in [0, 1]) played forward then back.
+fn animated_gif(
+    frames: &[Vec<f32>],
+    width: u32,
+    height: u32,
+    path: &Path,
+) -> Result<Vec<u8>, EvalError> {
+    use image::codecs::gif::{GifEncoder, Repeat};
+    let err = |e: image::ImageError| EvalError::Format {
+        path: path.to_path_buf(),
+        reason: format!("encoding the GIF: {e}"),
+    };
+    let mut bytes = Vec::new();
+    {
+        let mut enc = GifEncoder::new_with_speed(&mut bytes, 10);
+        enc.set_repeat(Repeat::Infinite).map_err(err)?;
+        let order = (0..frames.len()).chain((1..frames.len().saturating_sub(1)).rev());
+        for i in order {
+            let rgba: Vec<u8> = frames[i]
+                .chunks_exact(3)
+                .flat_map(|p| {
+                    let c = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+                    [c(p[0]), c(p[1]), c(p[2]), 255]
+                })
+                .collect();
+            let buf = image::RgbaImage::from_raw(width, height, rgba)
+                .expect("the frame holds width × height pixels");
+            let delay = image::Delay::from_numer_denom_ms(1000, 12);
+            enc.encode_frame(image::Frame::from_parts(buf, 0, 0, delay))
+                .map_err(err)?;
+        }
+    }
+    Ok(bytes)
+}

@@ -733,39 +733,22 @@ pub fn write_renders_on(
         };
         gems_data::save_png(&path, &img).map_err(EvalError::from)
     };
-    let settings = gems_splat::RenderSettings::default();
-    for v in &output.views {
-        let k = &v.intrinsics;
-        let cams: Vec<_> = v
-            .virtual_c2w
-            .iter()
-            .chain(std::iter::once(&v.mid_c2w))
-            .map(|p| Camera::from_c2w(k, &Se3::from(p)))
-            .collect();
-        let n = v.virtual_c2w.len();
-        let out = engine.forward(
-            &output.gaussians,
-            &cams,
-            &vec![[0.0; 3]; cams.len()],
-            &settings,
-        )?;
-        let px = (k.width * k.height * 3) as usize;
-        let frame = |i: usize| out.rgb[i * px..(i + 1) * px].to_vec();
-        let mut reblurred = vec![0.0f32; px];
-        for i in 0..n {
-            for (acc, x) in reblurred.iter_mut().zip(&out.rgb[i * px..(i + 1) * px]) {
-                *acc += x / n as f32;
-            }
-        }
+    for (i, v) in output.views.iter().enumerate() {
+        let burst = crate::export::render_exposure_burst(engine, output, i)?;
+        let k = &burst.intrinsics;
         let stem = file_stem(&v.name);
-        save(train_dir.join(format!("{stem}_mid.png")), k, frame(n))?;
-        if n > 0 {
-            save(train_dir.join(format!("{stem}_start.png")), k, frame(0))?;
-            save(train_dir.join(format!("{stem}_end.png")), k, frame(n - 1))?;
+        save(train_dir.join(format!("{stem}_mid.png")), k, burst.mid)?;
+        if let (Some(first), Some(last)) = (burst.frames.first(), burst.frames.last()) {
+            save(
+                train_dir.join(format!("{stem}_start.png")),
+                k,
+                first.clone(),
+            )?;
+            save(train_dir.join(format!("{stem}_end.png")), k, last.clone())?;
             save(
                 train_dir.join(format!("{stem}_reblurred.png")),
                 k,
-                reblurred,
+                burst.reblurred,
             )?;
         }
     }

@@ -255,3 +255,87 @@ fn cameras_export_as_colmap_and_nerfstudio_and_read_back_in_the_input_frame() {
         assert_eq!(f.camera.resolve(img.width, img.height), v.intrinsics);
     }
 }
+
+/// The burst of a photo is its exposure: the mean of its sharp frames is the re-blurred image
+/// the trainer's blur model renders from the same trajectory, and the files are written.
+#[test]
+fn an_exposure_burst_averages_to_the_reblurred_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = gems_synth::SynthConfig::tiny();
+    gems_synth::generate(&cfg, dir.path()).unwrap();
+    let scene = gems_data::open_scene(dir.path(), &Default::default()).unwrap();
+    let mut out = trained_on(&scene, 1, cfg.fov_x_deg);
+    out.config.num_virtual_views = 5;
+    let times = out.config.virtual_times();
+    for (i, v) in out.views.iter_mut().enumerate() {
+        // A moving exposure: knots along x and a turn about y, different per view.
+        v.knots = (0..out.config.num_knots())
+            .map(|j| {
+                let s = (j as f64 - 4.0) * 0.01 * (1.0 + i as f64);
+                [s, 0.0, 0.2 * s, 0.0, 0.5 * s, 0.0]
+            })
+            .collect();
+    }
+    for i in 0..out.views.len() {
+        let traj = out.trajectory(i);
+        let v = &mut out.views[i];
+        let c2w = Se3::from(&v.c2w_init);
+        v.virtual_c2w = gems_train::virtual_c2w(&c2w, &traj, &times)
+            .iter()
+            .map(Pose::from)
+            .collect();
+        v.mid_c2w = Pose::from(&(c2w * traj.eval(0.5)));
+    }
+    let mut engine = gems_gpu::Engine::cpu();
+    for i in 0..out.views.len() {
+        let burst = export::render_exposure_burst(&mut engine, &out, i).unwrap();
+        assert_eq!(burst.frames.len(), 5);
+        let traj = out.trajectory(i);
+        let c2w = Se3::from(&out.views[i].c2w_init);
+        let mut ws = gems_train::BlurWorkspace::default();
+        gems_train::render_blurred(
+            &mut engine,
+            &out.gaussians,
+            &gems_train::Exposure {
+                c2w_init: &c2w,
+                trajectory: &traj,
+                times: &times,
+                intrinsics: &out.views[i].intrinsics,
+            },
+            [0.0; 3],
+            &mut ws,
+        )
+        .unwrap();
+        let mean: Vec<f32> = (0..ws.blurred.len())
+            .map(|p| burst.frames.iter().map(|f| f[p]).sum::<f32>() / 5.0)
+            .collect();
+        let worst = mean
+            .iter()
+            .zip(&ws.blurred)
+            .chain(burst.reblurred.iter().zip(&ws.blurred))
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-5, "view {i}: {worst}");
+        // The frames differ: the exposure moves.
+        let d: f32 = burst.frames[0]
+            .iter()
+            .zip(&burst.frames[4])
+            .map(|(a, b)| (a - b).abs())
+            .sum();
+        assert!(d > 1.0, "view {i}: the burst does not move ({d})");
+    }
+    let bursts = dir.path().join("bursts");
+    let n = export::write_bursts(&bursts, &mut engine, &out, &mut |_| {}).unwrap();
+    assert_eq!(n, out.views.len());
+    let stem = std::path::Path::new(&out.views[0].name)
+        .file_stem()
+        .unwrap()
+        .to_string_lossy()
+        .into_owned();
+    for f in ["00.png", "04.png"] {
+        assert!(bursts.join(&stem).join(f).is_file(), "{f}");
+    }
+    assert!(bursts.join(format!("{stem}_mid.png")).is_file());
+    let gif = std::fs::read(bursts.join(format!("{stem}.gif"))).unwrap();
+    assert!(gif.starts_with(b"GIF89a"), "an animated GIF");
+}

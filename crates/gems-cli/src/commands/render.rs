@@ -1,4 +1,6 @@
-//! `gems render`: render a Gaussian-splat PLY to PNG from a camera given on the command line.
+//! `gems render`: render a Gaussian-splat PLY to PNG from a camera given on the command line,
+//! or, from a trained output folder, every training photo's exposure as a burst of sharp frames
+//! (`--bursts`: PNG frames, an animated GIF and the mid-exposure image per photo).
 //!
 //! The camera is one image of a COLMAP model (`--colmap <sparse dir> --image <name>`: its
 //! intrinsics and pose), or given on the command line: intrinsics from `--width/--height` and
@@ -15,11 +17,16 @@ use gems_splat::{Camera, RenderSettings, ply, write_png};
 /// Arguments of `gems render`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Inria-layout Gaussian-splat PLY file.
-    pub ply: PathBuf,
-    /// Output PNG.
+    /// Inria-layout Gaussian-splat PLY file, or (with --bursts) an output folder of `gems train`.
+    pub input: PathBuf,
+    /// Output PNG (a folder with --bursts; default `<input>/bursts`).
     #[arg(short, long)]
-    pub output: PathBuf,
+    pub output: Option<PathBuf>,
+    /// For every training photo of the trained output folder, its n sharp frames along the
+    /// exposure (`<stem>/00.png`…, start to end), an animated preview (`<stem>.gif`) and the
+    /// mid-exposure image (`<stem>_mid.png`); their mean is the re-blurred photo.
+    #[arg(long)]
+    pub bursts: bool,
     /// Image width in pixels.
     #[arg(long, default_value_t = 800)]
     pub width: u32,
@@ -184,13 +191,26 @@ pub fn camera(args: &Args) -> anyhow::Result<Camera> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.bursts {
+        return bursts(&args);
+    }
+    if args.input.is_dir() {
+        bail!(
+            "{} is a folder: give a PLY file, or --bursts to render a trained output folder's \
+             exposures",
+            args.input.display()
+        );
+    }
+    let Some(output) = &args.output else {
+        bail!("give the PNG to write with --output");
+    };
     let cam = camera(&args)?;
-    let g = ply::read_ply(&args.ply)?;
+    let g = ply::read_ply(&args.input)?;
     tracing::info!(
         gaussians = g.len(),
         sh_degree = g.sh_degree,
         "loaded {}",
-        args.ply.display()
+        args.input.display()
     );
     let settings = RenderSettings {
         antialiased: args.antialiased,
@@ -198,14 +218,44 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let mut renderer = super::open_engine(args.device)?;
     let out = renderer.forward(&g, &[cam], &[args.background], &settings)?;
-    write_png(&args.output, &out, 0)?;
+    write_png(output, &out, 0)?;
     let covered = out.alpha.iter().filter(|&&a| a > 0.5).count();
     tracing::info!(
         "wrote {} ({}x{}, {:.1}% of pixels covered)",
-        args.output.display(),
+        output.display(),
         out.width,
         out.height,
         100.0 * covered as f64 / out.alpha.len() as f64
+    );
+    Ok(())
+}
+
+/// `--bursts`: every training photo's exposure of the trained output folder `args.input`.
+fn bursts(args: &Args) -> anyhow::Result<()> {
+    let output = gems_train::TrainOutput::load(&args.input).with_context(|| {
+        format!(
+            "--bursts needs an output folder of `gems train`; cannot read one in {}",
+            args.input.display()
+        )
+    })?;
+    let dir = args
+        .output
+        .clone()
+        .unwrap_or_else(|| args.input.join("bursts"));
+    let mut engine = super::open_engine(args.device)?;
+    let bar = indicatif::ProgressBar::new(output.views.len() as u64);
+    bar.set_style(indicatif::ProgressStyle::with_template(
+        "bursts [{bar:30}] {pos}/{len} photos  {msg}",
+    )?);
+    let n = gems_eval::export::write_bursts(&dir, &mut engine, &output, &mut |name| {
+        bar.set_message(name.to_owned());
+        bar.inc(1);
+    })?;
+    bar.finish_and_clear();
+    println!(
+        "bursts: {n} photos × {} sharp frames in {}",
+        output.config.num_virtual_views,
+        dir.display()
     );
     Ok(())
 }
