@@ -1061,3 +1061,113 @@ fn bursts_and_camera_exports_from_a_trained_folder() {
         "--bursts needs an output folder",
     );
 }
+
+/// A short MP4 of a generated scene's blurry frames, made with ffmpeg (which `.ci/run`
+/// installs).
+fn clip_of(scene: &Path, out: &Path) {
+    let status = Command::new("ffmpeg")
+        .args(["-v", "error", "-y", "-framerate", "8", "-i"])
+        .arg(scene.join("images/%03d.png"))
+        .args(["-c:v", "libx264", "-pix_fmt", "yuv420p"])
+        .arg(out)
+        .status()
+        .expect("ffmpeg is installed (.ci/run installs it)");
+    assert!(status.success());
+}
+
+#[test]
+fn a_video_is_a_scene_of_ordered_frames_and_a_fly_through_is_a_video() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let clips = dir.path().join("clips");
+    std::fs::create_dir_all(&clips).unwrap();
+    let clip = clips.join("clip.mp4");
+    clip_of(&scene, &clip);
+    read_only(&clips);
+    let before = snapshot(&clips);
+
+    let info = gems(&["info", s(&clip)]);
+    ok(&info);
+    assert!(stdout(&info).contains("8.00 fps"), "{}", stdout(&info));
+
+    let out = dir.path().join("run");
+    ok(&train(
+        &clip,
+        &out,
+        &[
+            "--fps", "6", "--init", "sfm", "--steps", "10", "--device", "cpu",
+        ],
+    ));
+    let frames = out.join("frames");
+    let list = gems_data::video::read_frame_list(&frames).unwrap();
+    assert!(list.frames.len() >= 5, "{list:?}");
+    assert!((list.rate - 6.0).abs() < 1e-9);
+    for (k, f) in list.frames.iter().enumerate() {
+        assert_eq!(f.name, format!("{k:04}.png"));
+        assert!((f.time_s - k as f64 / 6.0).abs() < 1e-9);
+    }
+    let opened = gems_data::open_scene(&frames, &Default::default()).unwrap();
+    assert_eq!(
+        opened.frame_times.as_ref().unwrap().len(),
+        list.frames.len()
+    );
+    assert!(out.join("metrics.json").is_file() || out.join("point_cloud.ply").is_file());
+    assert_eq!(
+        snapshot(&clips),
+        before,
+        "nothing is written beside the video"
+    );
+
+    // The result goes back out as a video along its path and around it.
+    let video = dir.path().join("fly.mp4");
+    ok(&gems(&[
+        "render",
+        s(&out),
+        "--path",
+        "orbit",
+        "--frames",
+        "8",
+        "-o",
+        s(&video),
+        "--device",
+        "cpu",
+    ]));
+    assert!(std::fs::metadata(&video).unwrap().len() > 0);
+    let probed = gems_data::video::Ffmpeg::default().probe(&video).unwrap();
+    let k = gems_train::TrainOutput::load(&out).unwrap().views[0].intrinsics;
+    assert_eq!((probed.width, probed.height), (k.width, k.height));
+    // Without ffmpeg the frames stay as PNG.
+    let no_ffmpeg = gems(&[
+        "render",
+        s(&out),
+        "--path",
+        "train",
+        "--frames",
+        "4",
+        "-o",
+        s(&dir.path().join("t.mp4")),
+        "--ffmpeg",
+        "/nonexistent/ffmpeg",
+        "--device",
+        "cpu",
+    ]);
+    ok(&no_ffmpeg);
+    assert!(dir.path().join("t.frames/0003.png").is_file());
+
+    // Bad input: one clear error each.
+    let bad = dir.path().join("bad.mp4");
+    std::fs::write(&bad, b"not a video").unwrap();
+    fails_clearly(&gems(&["info", s(&bad)]), "not a video ffprobe can read");
+    fails_clearly(
+        &train(&bad, &dir.path().join("r2"), &["--steps", "5"]),
+        "not a video ffprobe can read",
+    );
+    fails_clearly(
+        &train(
+            &clip,
+            &dir.path().join("r3"),
+            &["--ffmpeg", "/nonexistent/ffmpeg"],
+        ),
+        "install ffmpeg",
+    );
+}

@@ -38,6 +38,7 @@ pub mod nerfstudio;
 mod npy;
 pub mod scene;
 pub mod undistort;
+pub mod video;
 
 pub use error::{DataError, FormatError, Result};
 pub use image::{ImageCache, ImageRgb, load_image, save_png};

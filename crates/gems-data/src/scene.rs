@@ -249,6 +249,9 @@ pub struct Scene {
     pub sfm_dir: Option<PathBuf>,
     /// How the scene's COLMAP model's images were matched to the views (`None`: no model).
     pub sfm_match: Option<colmap::NameMatch>,
+    /// Each view's time in the clip, seconds, when the views are ordered frames of one video
+    /// (a folder with [`crate::video::FRAMES_FILE`]); `None`: unordered photos.
+    pub frame_times: Option<Vec<f64>>,
     /// Where `View::pose` comes from.
     pub pose_source: PoseSource,
     /// The manifest, if present.
@@ -873,6 +876,7 @@ fn new_scene(
         sfm: None,
         sfm_dir: None,
         sfm_match: None,
+        frame_times: None,
         pose_source: PoseSource::None,
         manifest: None,
         events: EventFiles::default(),
@@ -1180,7 +1184,32 @@ fn open_folder(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Scene> 
     };
     let names = full.iter().map(|p| file_name(p)).collect();
     let views = make_views(names, &images, None)?;
-    Ok(new_scene(root, Layout::Folder, opts, None, views))
+    let mut scene = new_scene(root, Layout::Folder, opts, None, views);
+    // Frames of a clip keep their order and times (`gems train clip.mp4` writes them).
+    if let Some(list) = crate::video::read_frame_list(root) {
+        let times: Option<Vec<f64>> = scene
+            .views
+            .iter()
+            .map(|v| {
+                list.frames
+                    .iter()
+                    .find(|f| f.name == v.name)
+                    .map(|f| f.time_s)
+            })
+            .collect();
+        if let Some(times) = times {
+            scene.uses.push(FileUse {
+                path: root.join(crate::video::FRAMES_FILE),
+                role: format!(
+                    "ordered frames of {} ({:.2} per second, times kept)",
+                    list.video.display(),
+                    list.rate
+                ),
+            });
+            scene.frame_times = Some(times);
+        }
+    }
+    Ok(scene)
 }
 
 fn open_nerfstudio(root: &Path, opts: &OpenOptions, cache: &Cache) -> Result<Scene> {

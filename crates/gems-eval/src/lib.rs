@@ -24,6 +24,8 @@
 //!   ([`MetricsReport`], [`write_metrics_json`]).
 //! - [`export`]: the trained cameras out, as a COLMAP model (with the Gaussians' centres as
 //!   points) or a nerfstudio `transforms.json` with the sharp renders, in the input frame.
+//! - [`flythrough`]: camera paths for a video of the result (the training path smoothed, or
+//!   an orbit).
 //! - [`tum`]: TUM trajectory files; [`write_trajectories`] writes every view's n virtual poses
 //!   plus the midpoints (and ground truth when known), in the input frame.
 //! - [`report`]: `report.html` with loss/PSNR curves, a trajectory plot and a
@@ -43,6 +45,7 @@
 
 pub mod browser;
 pub mod export;
+pub mod flythrough;
 mod metrics;
 mod protocol;
 pub mod refine;

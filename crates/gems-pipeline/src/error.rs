@@ -53,4 +53,6 @@ pub enum PipelineError {
     Eval(#[from] gems_eval::EvalError),
     #[error(transparent)]
     Lpips(#[from] gems_metrics::LpipsError),
+    #[error(transparent)]
+    Video(#[from] gems_data::video::VideoError),
 }

@@ -31,7 +31,7 @@ pub use error::PipelineError;
 pub use gems_train::InitMode;
 pub use init::{
     EventInit, Init, InitRequest, edi_images, rerun_init_on_renders, reruns_on_renders,
-    resolve_init, run_colmap, run_sfm,
+    resolve_init, run_colmap, run_sfm, video_frames,
 };
 pub use protocol::{Headline, Protocol, ProtocolSettings};
 pub use run::{

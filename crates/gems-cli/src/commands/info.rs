@@ -13,6 +13,8 @@ use gems_data::{Layout, OpenOptions, open_scene, scene_info};
 pub struct Args {
     /// Scene folder.
     pub scene: PathBuf,
+    #[command(flatten)]
+    pub video: super::VideoArgs,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -43,6 +45,25 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if gems_data::video::is_video(&args.scene) {
+        // A video is described, not decoded: nothing is written anywhere.
+        let info = args.video.ffmpeg().probe(&args.scene)?;
+        let rate = args
+            .video
+            .fps
+            .unwrap_or_else(|| gems_data::video::default_rate(&info));
+        println!("video      {}", args.scene.display());
+        println!(
+            "stream     {}x{}, {:.2} fps, {:.2} s",
+            info.width, info.height, info.fps, info.duration_s
+        );
+        println!(
+            "frames     about {} at {rate:.2} per second (ordered; `gems train` extracts them \
+             into <output>/frames)",
+            (info.duration_s * rate).round() as u64
+        );
+        return Ok(());
+    }
     let opts = OpenOptions {
         downscale: args.downscale,
         hold: args.hold,

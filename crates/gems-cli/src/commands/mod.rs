@@ -16,6 +16,49 @@ pub mod train;
 
 use anyhow::Context;
 use gems_gpu::DeviceChoice;
+
+/// How a video given instead of a scene folder is read (`gems train`, `sfm`, `info`).
+#[derive(clap::Args, Clone, Debug)]
+pub struct VideoArgs {
+    /// For a video: frames taken per second of the clip (default: about 40 frames from the
+    /// whole clip, at most its own rate).
+    #[arg(long)]
+    pub fps: Option<f64>,
+    /// The ffmpeg executable that decodes a video (ffprobe is taken from beside it).
+    #[arg(long, default_value = "ffmpeg")]
+    pub ffmpeg: std::path::PathBuf,
+}
+
+impl VideoArgs {
+    pub fn ffmpeg(&self) -> gems_data::video::Ffmpeg {
+        gems_data::video::Ffmpeg {
+            binary: self.ffmpeg.clone(),
+        }
+    }
+
+    /// `input` itself when it is a scene folder; for a video, its frames extracted into
+    /// `<work>/frames` (see [`gems_pipeline::video_frames`]).
+    pub fn scene(
+        &self,
+        input: &std::path::Path,
+        work: &std::path::Path,
+    ) -> anyhow::Result<std::path::PathBuf> {
+        if !gems_data::video::is_video(input) {
+            return Ok(input.to_path_buf());
+        }
+        println!(
+            "video: {} → frames in {}",
+            input.display(),
+            work.join("frames").display()
+        );
+        Ok(gems_pipeline::video_frames(
+            input,
+            work,
+            self.fps,
+            &self.ffmpeg(),
+        )?)
+    }
+}
 use gems_gpu::Engine;
 
 /// The splatting engine for `--device`, announced on stdout; `--device gpu` without an

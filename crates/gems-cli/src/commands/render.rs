@@ -14,6 +14,15 @@ use anyhow::{Context, bail};
 use gems_math::{Intrinsics, Se3};
 use gems_splat::{Camera, RenderSettings, ply, write_png};
 
+/// Camera path of a fly-through.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PathKind {
+    /// The training photos' mid-exposure cameras, smoothed.
+    Train,
+    /// A circle around the scene, looking at its centre.
+    Orbit,
+}
+
 /// Arguments of `gems render`.
 #[derive(clap::Args)]
 pub struct Args {
@@ -27,6 +36,20 @@ pub struct Args {
     /// mid-exposure image (`<stem>_mid.png`); their mean is the re-blurred photo.
     #[arg(long)]
     pub bursts: bool,
+    /// A fly-through video of a trained output folder: along the training path (smoothed, in
+    /// the photos' name order) or an orbit around the scene, encoded with the user's ffmpeg as
+    /// `--output` (default `<input>/flythrough.mp4`); PNG frames when ffmpeg is absent.
+    #[arg(long, value_enum, conflicts_with = "bursts")]
+    pub path: Option<PathKind>,
+    /// Frames of the fly-through.
+    #[arg(long, default_value_t = 120)]
+    pub frames: usize,
+    /// Frames per second of the fly-through video.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// The ffmpeg executable for the fly-through video.
+    #[arg(long, default_value = "ffmpeg")]
+    pub ffmpeg: PathBuf,
     /// Image width in pixels.
     #[arg(long, default_value_t = 800)]
     pub width: u32,
@@ -194,10 +217,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.bursts {
         return bursts(&args);
     }
+    if let Some(kind) = args.path {
+        return flythrough(&args, kind);
+    }
     if args.input.is_dir() {
         bail!(
-            "{} is a folder: give a PLY file, or --bursts to render a trained output folder's \
-             exposures",
+            "{} is a folder: give a PLY file, or --bursts or --path to render a trained output \
+             folder",
             args.input.display()
         );
     }
@@ -257,5 +283,72 @@ fn bursts(args: &Args) -> anyhow::Result<()> {
         output.config.num_virtual_views,
         dir.display()
     );
+    Ok(())
+}
+
+/// `--path`: a fly-through video of the trained output folder `args.input`.
+fn flythrough(args: &Args, kind: PathKind) -> anyhow::Result<()> {
+    let output = gems_train::TrainOutput::load(&args.input).with_context(|| {
+        format!(
+            "--path needs an output folder of `gems train`; cannot read one in {}",
+            args.input.display()
+        )
+    })?;
+    if args.frames < 2 || !(args.fps.is_finite() && args.fps > 0.0) {
+        bail!("--frames must be at least 2 and --fps positive");
+    }
+    let poses = match kind {
+        PathKind::Train => gems_eval::flythrough::training_path(&output, args.frames, 2),
+        PathKind::Orbit => gems_eval::flythrough::orbit_path(&output, args.frames),
+    }
+    .context("the result has too few cameras (or no Gaussians) for that path")?;
+    let video = args
+        .output
+        .clone()
+        .unwrap_or_else(|| args.input.join("flythrough.mp4"));
+    let frames_dir = video.with_extension("frames");
+    std::fs::create_dir_all(&frames_dir)
+        .with_context(|| format!("creating {}", frames_dir.display()))?;
+    let k = output.views[0].intrinsics;
+    let mut engine = super::open_engine(args.device)?;
+    let settings = RenderSettings {
+        antialiased: args.antialiased,
+        ..Default::default()
+    };
+    let bar = indicatif::ProgressBar::new(poses.len() as u64);
+    bar.set_style(indicatif::ProgressStyle::with_template(
+        "fly-through [{bar:30}] {pos}/{len} frames  ETA {eta}",
+    )?);
+    for (i, c2w) in poses.iter().enumerate() {
+        let cam = Camera::from_c2w(&k, c2w);
+        let out = engine.forward(&output.gaussians, &[cam], &[args.background], &settings)?;
+        write_png(&frames_dir.join(format!("{i:04}.png")), &out, 0)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let ffmpeg = gems_data::video::Ffmpeg {
+        binary: args.ffmpeg.clone(),
+    };
+    match ffmpeg.encode(&frames_dir, args.fps, &video) {
+        Ok(()) => {
+            std::fs::remove_dir_all(&frames_dir)
+                .with_context(|| format!("removing {}", frames_dir.display()))?;
+            println!(
+                "fly-through: {} ({} frames, {} fps)",
+                video.display(),
+                poses.len(),
+                args.fps
+            );
+        }
+        Err(e @ gems_data::video::VideoError::Missing { .. }) => {
+            tracing::warn!("{e}");
+            println!(
+                "fly-through: {} PNG frames in {} (no video: ffmpeg is not available)",
+                poses.len(),
+                frames_dir.display()
+            );
+        }
+        Err(e) => return Err(e.into()),
+    }
     Ok(())
 }

@@ -7,8 +7,11 @@ use std::path::PathBuf;
 /// Arguments of `gems sfm`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scene folder (with an `images/` folder) or a folder of images.
+    /// Scene folder (with an `images/` folder), a folder of images, or a video (its frames go
+    /// to `<output>/frames`).
     pub scene: PathBuf,
+    #[command(flatten)]
+    pub video: super::VideoArgs,
     /// Output folder: `sparse/0` (COLMAP binary), `sfm_report.json`, `sfm_topview.png`.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -43,7 +46,8 @@ pub struct Args {
     pub colmap_binary: PathBuf,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(mut args: Args) -> anyhow::Result<()> {
+    args.scene = args.video.scene(&args.scene, &args.output)?;
     let focal = args.focal.or_else(|| {
         gems_data::exif::folder_focal(&args.scene).map(|f| {
             println!(

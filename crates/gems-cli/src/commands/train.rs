@@ -13,8 +13,11 @@ use super::edi::LinearisationArg;
 /// Arguments of `gems train`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scene folder (GeMS/PRISM3D, LLFF or nerfstudio layout).
+    /// Scene folder (any layout `gems info` reads, or a folder of photos), or a video (its
+    /// frames are extracted into `<output>/frames` with the user's ffmpeg).
     pub scene: PathBuf,
+    #[command(flatten)]
+    pub video: super::VideoArgs,
     /// Output folder.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -135,9 +138,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(p) => TrainConfig::from_toml_file(p)?,
         None => TrainConfig::default(),
     };
+    let scene = args.video.scene(&args.scene, &args.output)?;
     let settings = resolve(
         args.protocol,
-        &args.scene,
+        &scene,
         args.downscale,
         args.hold,
         args.steps,
@@ -174,7 +178,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         colmap_binary: args.colmap_binary,
     };
     let run = gems_pipeline::train_scene(gems_pipeline::TrainRequest {
-        scene: args.scene,
+        scene,
         output: args.output,
         init,
         cfg,
