@@ -378,6 +378,49 @@ pub(crate) fn place_missing_views(
         .collect()
 }
 
+/// The frames of a video, as a scene folder: `<work>/frames/` (numbered PNG frames in time
+/// order, and `frames.json` with each frame's time), extracted with the user's ffmpeg at `rate`
+/// frames per second (default [`gems_data::video::default_rate`]). Frames already extracted
+/// from the same clip at the same rate are reused (a resumed run). Nothing is written beside the
+/// video.
+pub fn video_frames(
+    video: &Path,
+    work: &Path,
+    rate: Option<f64>,
+    ffmpeg: &gems_data::video::Ffmpeg,
+) -> Result<PathBuf, PipelineError> {
+    let dir = work.join("frames");
+    let video = std::fs::canonicalize(video).unwrap_or_else(|_| video.to_path_buf());
+    if let Some(list) = gems_data::video::read_frame_list(&dir)
+        && list.video == video
+        && rate.is_none_or(|r| (r - list.rate).abs() < 1e-9)
+    {
+        tracing::info!(
+            frames = list.frames.len(),
+            "reusing the frames in {}",
+            dir.display()
+        );
+        return Ok(dir);
+    }
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).map_err(|source| gems_fs::FsError {
+            path: dir.clone(),
+            source,
+        })?;
+    }
+    let list = ffmpeg.extract_frames(&video, &dir, rate)?;
+    tracing::info!(
+        frames = list.frames.len(),
+        rate = format!("{:.2}", list.rate),
+        "frames of {} ({:.1} s at {:.1} fps) in {}",
+        video.display(),
+        list.info.duration_s,
+        list.info.fps,
+        dir.display()
+    );
+    Ok(dir)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -446,47 +489,4 @@ mod tests {
         };
         assert!(place_missing_views(&first, &mut lone).is_empty());
     }
-}
-
-/// The frames of a video, as a scene folder: `<work>/frames/` (numbered PNG frames in time
-/// order, and `frames.json` with each frame's time), extracted with the user's ffmpeg at `rate`
-/// frames per second (default [`gems_data::video::default_rate`]). Frames already extracted
-/// from the same clip at the same rate are reused (a resumed run). Nothing is written beside the
-/// video.
-pub fn video_frames(
-    video: &Path,
-    work: &Path,
-    rate: Option<f64>,
-    ffmpeg: &gems_data::video::Ffmpeg,
-) -> Result<PathBuf, PipelineError> {
-    let dir = work.join("frames");
-    let video = std::fs::canonicalize(video).unwrap_or_else(|_| video.to_path_buf());
-    if let Some(list) = gems_data::video::read_frame_list(&dir)
-        && list.video == video
-        && rate.is_none_or(|r| (r - list.rate).abs() < 1e-9)
-    {
-        tracing::info!(
-            frames = list.frames.len(),
-            "reusing the frames in {}",
-            dir.display()
-        );
-        return Ok(dir);
-    }
-    if dir.exists() {
-        std::fs::remove_dir_all(&dir).map_err(|source| gems_fs::FsError {
-            path: dir.clone(),
-            source,
-        })?;
-    }
-    let list = ffmpeg.extract_frames(&video, &dir, rate)?;
-    tracing::info!(
-        frames = list.frames.len(),
-        rate = format!("{:.2}", list.rate),
-        "frames of {} ({:.1} s at {:.1} fps) in {}",
-        video.display(),
-        list.info.duration_s,
-        list.info.fps,
-        dir.display()
-    );
-    Ok(dir)
 }

@@ -322,7 +322,7 @@ fn flythrough(args: &Args, kind: PathKind) -> anyhow::Result<()> {
     for (i, c2w) in poses.iter().enumerate() {
         let cam = Camera::from_c2w(&k, c2w);
         let out = engine.forward(&output.gaussians, &[cam], &[args.background], &settings)?;
-        write_png(&frames_dir.join(format!("{i:04}.png")), &out, 0)?;
+        write_png(frames_dir.join(format!("{i:04}.png")), &out, 0)?;
         bar.inc(1);
     }
     bar.finish_and_clear();
