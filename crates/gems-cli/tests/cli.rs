@@ -974,7 +974,9 @@ fn bench_real_runs_the_rows_under_the_protocol_and_reads_finished_rows_back() {
         "{table}"
     );
     assert!(
-        table.contains("the dataset's poses (its COLMAP model), carried into the trained frame"),
+        table.contains(
+            "the dataset's poses (its COLMAP model), carried into the result's initial frame"
+        ),
         "{table}"
     );
     let rows: serde_json::Value =

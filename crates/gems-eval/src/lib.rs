@@ -12,9 +12,9 @@
 //!   after refinement from their initial pose, the GeMS authors' figure), `nvs` (held-out views
 //!   refined from their reference pose), `nvs_no_pose_opt` (held-out views at their reference
 //!   pose: the dataset's own when the scene has poses, as the published tables render, else the
-//!   initialisation's; carried into the trained frame by the similarity between the same
-//!   source's training cameras and the trained ones, [`HeldOutPosing`]; [`CameraShift`] says
-//!   how far training moved the cameras from that source's) and APE
+//!   initialisation's; carried into the result's initial frame by the similarity between the
+//!   same source's training cameras and the result's, [`HeldOutPosing`], [`HeldOutFrame`];
+//!   [`CameraShift`] says how far training moved the cameras from that source's) and APE
 //!   ([`ape_of_centres`]: Sim(3) Umeyama of midpoint camera centres to the ground truth, evo's
 //!   statistics, in the input frame's units; `ape_init` the same for the initial poses, so the
 //!   pair shows what training did to the cameras), and the relative rotation error over every
@@ -56,14 +56,14 @@ pub mod viewer;
 use std::path::{Path, PathBuf};
 
 pub use metrics::{
-    ApeSummary, CameraShift, EvalView, HeldOutPosing, ImageScore, MetricsReport, PoseMode,
-    RotationErrorSummary, SplitResult, SplitScores, ape_of_centres, evaluate_views,
+    ApeSummary, CameraShift, EvalView, HeldOutFrame, HeldOutPosing, ImageScore, MetricsReport,
+    PoseMode, RotationErrorSummary, SplitResult, SplitScores, ape_of_centres, evaluate_views,
     evaluate_views_with_progress, relative_rotation_error, score_image, split_labels,
 };
 pub use protocol::{
-    EvalData, Evaluation, HeldOutView, attach_edi_images, eval_data_from_scene, evaluate_output,
-    evaluate_output_on, evaluation_units, open_scene_for, render_mid_exposure, report_input,
-    write_renders, write_renders_on, write_trajectories,
+    EvalData, Evaluation, HeldOutView, attach_edi_images, eval_data_from_scene,
+    eval_data_from_scene_in, evaluate_output, evaluate_output_on, evaluation_units, open_scene_for,
+    render_mid_exposure, report_input, write_renders, write_renders_on, write_trajectories,
 };
 pub use refine::{PoseRefineConfig, Refined, refine_pose};
 pub use report::{GridRow, ReportInput, write_report};

@@ -5,14 +5,14 @@ use std::path::Path;
 
 use gems_data::{OpenOptions, PoseSource, Scene, Split, load_image, open_scene};
 use gems_gpu::Engine;
-use gems_math::{Intrinsics, Se3};
+use gems_math::{Intrinsics, Pose, Se3};
 use gems_metrics::Lpips;
 use gems_splat::Camera;
 use gems_train::TrainOutput;
 
 use crate::EvalError;
 use crate::metrics::{
-    ApeSummary, CameraShift, EvalView, HeldOutPosing, MetricsReport, PoseMode,
+    ApeSummary, CameraShift, EvalView, HeldOutFrame, HeldOutPosing, MetricsReport, PoseMode,
     RotationErrorSummary, SplitResult, SplitScores, ape_of_centres, evaluate_views_with_progress,
     relative_rotation_error, score_image,
 };
@@ -61,7 +61,7 @@ pub struct Evaluation {
     pub nvs_no_pose_opt: SplitResult,
 }
 
-fn se3(p: &gems_math::Pose) -> Se3 {
+fn se3(p: &Pose) -> Se3 {
     Se3::from(p)
 }
 
@@ -198,7 +198,7 @@ fn input_scores(
 /// ground truth's, in the input frame, for the training views whose ground-truth pose is known.
 fn poses_with_gt(
     output: &TrainOutput,
-    pose: impl Fn(&gems_train::ViewResult) -> &gems_math::Pose,
+    pose: impl Fn(&gems_train::ViewResult) -> &Pose,
 ) -> Vec<(Se3, Se3)> {
     output
         .views
@@ -314,9 +314,20 @@ fn load_rgb(path: &Path, k: &Intrinsics) -> Result<Vec<f32>, EvalError> {
 /// Ground truth from the scene the result was trained on (opened at the training resolution):
 /// sharp images of the training views matched by name, blurry inputs for the report, and the
 /// held-out views with a sharp ground truth, posed as [`held_out_reference`] says and carried
-/// into the trained frame by the similarity between the same source's training cameras and the
-/// trained ones ([`EvalData::held_out_posing`]).
+/// into the result's initial frame ([`HeldOutFrame::Initial`], see
+/// [`eval_data_from_scene_in`]).
 pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalData, EvalError> {
+    eval_data_from_scene_in(output, scene, HeldOutFrame::Initial)
+}
+
+/// [`eval_data_from_scene`] with the held-out views carried into `frame`: by the similarity
+/// between the reference's training cameras and the result's initial ones, or its trained
+/// mid-exposure ones ([`EvalData::held_out_posing`] records which).
+pub fn eval_data_from_scene_in(
+    output: &TrainOutput,
+    scene: &Scene,
+    frame: HeldOutFrame,
+) -> Result<EvalData, EvalError> {
     let mut data = EvalData::default();
     for v in &output.views {
         let sv = scene.views.iter().find(|s| s.name == v.name);
@@ -341,36 +352,32 @@ pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalD
         None => None,
     };
     let reference = held_out_reference(scene, pose_model.as_ref());
-    // Training cameras in both frames: the reference's and the trained mid-exposure ones (input
-    // frame).
-    let pairs: Vec<(Se3, Se3)> = output
-        .views
-        .iter()
-        .filter_map(|v| {
-            let p = (reference.pose)(v.name.as_str())?;
-            Some((
-                Se3::from(&p.0).inverse(),
-                to_input_frame(output, &se3(&v.mid_c2w)),
-            ))
-        })
-        .collect();
-    let similarity = gems_math::camera_similarity(&pairs);
-    data.camera_shift = similarity.as_ref().and_then(|sim| {
-        let initial: Vec<(Se3, Se3)> = output
+    // Training cameras in both frames, the reference's and the result's (input frame): the
+    // initial cameras or the trained mid-exposure ones.
+    let pairs_with = |pose: &dyn Fn(&gems_train::ViewResult) -> &Pose| -> Vec<(Se3, Se3)> {
+        output
             .views
             .iter()
             .filter_map(|v| {
                 let p = (reference.pose)(v.name.as_str())?;
                 Some((
                     Se3::from(&p.0).inverse(),
-                    to_input_frame(output, &se3(&v.c2w_init)),
+                    to_input_frame(output, &se3(pose(v))),
                 ))
             })
-            .collect();
-        camera_shift(sim, &pairs, &initial)
-    });
+            .collect()
+    };
+    let initial = pairs_with(&|v| &v.c2w_init);
+    let trained = pairs_with(&|v| &v.mid_c2w);
+    data.camera_shift = camera_shift(&initial, &trained);
+    let pairs = match frame {
+        HeldOutFrame::Initial => &initial,
+        HeldOutFrame::Trained => &trained,
+    };
+    let similarity = gems_math::camera_similarity(pairs);
     data.held_out_posing = Some(HeldOutPosing {
         source: reference.source.clone(),
+        frame,
         similarity_cameras: if similarity.is_some() { pairs.len() } else { 0 },
     });
     for s in scene.views.iter().filter(|s| s.split == Split::NovelView) {
@@ -407,7 +414,7 @@ pub fn eval_data_from_scene(output: &TrainOutput, scene: &Scene) -> Result<EvalD
 struct Reference<'a> {
     source: String,
     #[allow(clippy::type_complexity)]
-    pose: Box<dyn Fn(&str) -> Option<(gems_math::Pose, Option<Intrinsics>)> + 'a>,
+    pose: Box<dyn Fn(&str) -> Option<(Pose, Option<Intrinsics>)> + 'a>,
 }
 
 /// The poses held-out views are evaluated at, in order of preference: the dataset's own (the
@@ -450,23 +457,21 @@ fn held_out_reference<'a>(
     }
 }
 
-/// How far the trained mid-exposure cameras (and the initial ones) lie from the reference
-/// cameras, after the similarity fitted between reference and trained cameras.
-fn camera_shift(
-    sim: &gems_math::Sim3,
-    trained: &[(Se3, Se3)],
-    initial: &[(Se3, Se3)],
-) -> Option<CameraShift> {
-    let centres: Vec<_> = trained.iter().map(|(r, _)| sim.act_c2w(r).trans).collect();
-    let extent = centres
-        .iter()
-        .flat_map(|a| centres.iter().map(move |b| (a - b).norm()))
-        .fold(0.0, f64::max);
-    if extent <= 0.0 {
-        return None;
-    }
-    let rmse = |pairs: &[(Se3, Se3)]| -> (f64, f64) {
-        let n = pairs.len().max(1) as f64;
+/// How far the trained mid-exposure cameras, and the initial ones, lie from the reference
+/// cameras of the same views, each set after its own best similarity to them (so a change of
+/// frame, scale or gauge counts for nothing, a change of shape for everything).
+fn camera_shift(initial: &[(Se3, Se3)], trained: &[(Se3, Se3)]) -> Option<CameraShift> {
+    let residual = |pairs: &[(Se3, Se3)]| -> Option<(f64, f64)> {
+        let sim = gems_math::camera_similarity(pairs)?;
+        let centres: Vec<_> = pairs.iter().map(|(_, b)| b.trans).collect();
+        let extent = centres
+            .iter()
+            .flat_map(|a| centres.iter().map(move |b| (a - b).norm()))
+            .fold(0.0, f64::max);
+        if extent <= 0.0 {
+            return None;
+        }
+        let n = pairs.len() as f64;
         let (c, r) = pairs.iter().fold((0.0, 0.0), |(c, r), (a, b)| {
             let a = sim.act_c2w(a);
             let dr = gems_math::So3::from_matrix_orthonormalized(&(a.rot.transpose() * b.rot))
@@ -477,10 +482,10 @@ fn camera_shift(
                 r + dr.to_degrees().powi(2),
             )
         });
-        (100.0 * (c / n).sqrt() / extent, (r / n).sqrt())
+        Some((100.0 * (c / n).sqrt() / extent, (r / n).sqrt()))
     };
-    let (centre_pct, rotation_deg) = rmse(trained);
-    let (initial_centre_pct, initial_rotation_deg) = rmse(initial);
+    let (centre_pct, rotation_deg) = residual(trained)?;
+    let (initial_centre_pct, initial_rotation_deg) = residual(initial)?;
     Some(CameraShift {
         views: trained.len(),
         centre_pct,
@@ -535,7 +540,7 @@ pub fn report_input(
     max_rows: usize,
 ) -> ReportInput {
     let norm = &output.normalization;
-    let centre = |p: &gems_math::Pose| -> [f64; 3] { norm.invert_point(&se3(p).trans).into() };
+    let centre = |p: &Pose| -> [f64; 3] { norm.invert_point(&se3(p).trans).into() };
     let grid = eval
         .deblur_views
         .iter()

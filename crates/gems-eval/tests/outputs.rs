@@ -106,6 +106,7 @@ fn metrics_json_round_trip_and_keys() {
             .collect(),
         held_out_pose: Some(HeldOutPosing {
             source: "the dataset's poses (its COLMAP model)".into(),
+            frame: HeldOutFrame::Trained,
             similarity_cameras: 23,
         }),
         camera_shift: Some(CameraShift {
@@ -304,6 +305,7 @@ fn report_writes_html_and_figures() {
         labels: Default::default(),
         held_out_pose: Some(HeldOutPosing {
             source: "the dataset's poses (its poses file)".into(),
+            frame: HeldOutFrame::Initial,
             similarity_cameras: 4,
         }),
         camera_shift: None,
@@ -356,7 +358,7 @@ fn report_writes_html_and_figures() {
         "cpu (2 threads)",
         "95 s initialisation and training, evaluation 2 s",
         "1.50 GiB",
-        "poses file), carried into the trained frame by the similarity of 4 training cameras",
+        "poses file), carried into the result's initial frame by the similarity of 4 training cameras",
     ] {
         assert!(html.contains(needle), "report lacks {needle:?}");
     }

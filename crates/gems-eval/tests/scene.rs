@@ -130,12 +130,11 @@ fn ground_truth_and_held_out_views_from_a_scene() {
     );
 }
 
-/// Training moves the whole frame (the gauge is free): the held-out views must follow it. Here
-/// the trained cameras are the reference cameras under a known similarity; every held-out view
-/// is then evaluated at its reference pose under that same similarity, and the cameras moved by
-/// nothing but it.
+/// Held-out views are carried into the result's initial frame (the identity here: the result
+/// started from the reference's poses), or into the trained cameras' frame: here those are the
+/// reference cameras under a known similarity, and every held-out view follows it.
 #[test]
-fn held_out_views_follow_the_trained_frame_by_the_similarity_of_the_training_cameras() {
+fn held_out_views_are_carried_into_the_initial_or_the_trained_frame() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = gems_synth::SynthConfig {
         hold: 4,
@@ -152,7 +151,19 @@ fn held_out_views_follow_the_trained_frame_by_the_similarity_of_the_training_cam
     for v in &mut out.views {
         v.mid_c2w = Pose::from(&sim.act_c2w(&Se3::from(&v.mid_c2w)));
     }
+    // In the initial frame (the default) the held-out views are where the reference puts
+    // them: the result started from the reference's own poses.
     let data = eval_data_from_scene(&out, &scene).unwrap();
+    assert_eq!(
+        data.held_out_posing.as_ref().unwrap().frame,
+        HeldOutFrame::Initial
+    );
+    for h in &data.held_out {
+        let s = scene.views.iter().find(|s| s.name == h.name).unwrap();
+        let want = Se3::from(&s.gt_pose.unwrap()).inverse();
+        assert!((h.c2w_init.trans - want.trans).norm() < 1e-9, "{}", h.name);
+    }
+    let data = eval_data_from_scene_in(&out, &scene, HeldOutFrame::Trained).unwrap();
     let posing = data.held_out_posing.as_ref().unwrap();
     assert_eq!(posing.source, "the ground-truth poses");
     assert_eq!(posing.similarity_cameras, out.views.len());
@@ -167,14 +178,25 @@ fn held_out_views_follow_the_trained_frame_by_the_similarity_of_the_training_cam
             h.name
         );
     }
+    // A similarity changes no camera's place relative to the others: nothing moved.
     let shift = data.camera_shift.unwrap();
     assert_eq!(shift.views, out.views.len());
     assert!(
         shift.centre_pct < 1e-6 && shift.rotation_deg < 1e-6,
         "{shift:?}"
     );
-    // The initial cameras sit where the reference's are, which the similarity moved away.
-    assert!(shift.initial_centre_pct > 1.0, "{shift:?}");
+    assert!(shift.initial_centre_pct < 1e-6, "{shift:?}");
+    // One camera moved on its own: that is a change of shape.
+    let nudge = gems_math::Vector6::new(0.2, 0.0, 0.0, 0.0, 0.05, 0.0);
+    out.views[0].mid_c2w = Pose::from(&(Se3::from(&out.views[0].mid_c2w) * Se3::exp(&nudge)));
+    let moved = eval_data_from_scene(&out, &scene)
+        .unwrap()
+        .camera_shift
+        .unwrap();
+    assert!(
+        moved.centre_pct > 0.1 && moved.rotation_deg > 0.5,
+        "{moved:?}"
+    );
 }
 
 /// The trained cameras leave as a COLMAP model and a nerfstudio transforms file in the scene's

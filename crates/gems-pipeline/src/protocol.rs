@@ -5,7 +5,8 @@
 //! (`iCVTEAM/E2NeRF`) and the GeMS/PRISM3D training script (`GopiRajuMatta/PRISM3D:train.sh`).
 //!
 //! Every protocol's evaluation reports held-out views both ways: at the dataset's pose carried
-//! into the trained frame (what the NeRF-era tables do: they render at the COLMAP poses) and
+//! into the result's initial frame (what the NeRF-era tables do: they render at the COLMAP
+//! poses) and
 //! after test-time pose refinement (BAD-Gaussians, GeMS). [`Protocol::headline`] says which of
 //! the two the protocol's own table prints.
 
@@ -40,7 +41,7 @@ pub enum Protocol {
 /// Which held-out figure a protocol's own table prints.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Headline {
-    /// At the dataset's pose, carried into the trained frame, no refinement.
+    /// At the dataset's pose, carried into the result's initial frame, no refinement.
     DatasetPose,
     /// After test-time pose refinement.
     Refined,

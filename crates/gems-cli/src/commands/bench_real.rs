@@ -10,7 +10,7 @@
 //! 3. **sfm**: gems from the built-in SfM on the blurry photos alone;
 //! 4. **events**: GeMS-E (EDI-deblurred images for the SfM), when the scene has events.
 //!
-//! Columns: held-out PSNR/SSIM/LPIPS at the dataset's pose (carried into the trained frame) and
+//! Columns: held-out PSNR/SSIM/LPIPS at the dataset's pose (carried into the result's frame) and
 //! after test-time pose refinement, how far training moved the cameras from the dataset's, wall
 //! time (initialisation, training, evaluation) and peak memory. Writes `bench.md` and
 //! `bench.json`; each run keeps its folder (`<output>/<row>/`: metrics, report). A row whose

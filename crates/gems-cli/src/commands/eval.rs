@@ -7,6 +7,13 @@ use std::path::PathBuf;
 use anyhow::Context;
 use gems_eval::{PoseRefineConfig, write_metrics_json, write_report, write_trajectories};
 
+/// `--held-out-frame`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FrameArg {
+    Initial,
+    Trained,
+}
+
 /// Arguments of `gems eval`.
 #[derive(clap::Args)]
 pub struct Args {
@@ -24,6 +31,11 @@ pub struct Args {
     /// used, else the protocol's).
     #[arg(long)]
     pub hold: Option<i64>,
+    /// Which of the result's frames held-out views are carried into: `initial` (the frame the
+    /// Gaussians started in; the dataset's poses exactly when training started from them) or
+    /// `trained` (the trained cameras' frame).
+    #[arg(long, value_enum, default_value = "initial")]
+    pub held_out_frame: FrameArg,
     /// The published protocol to report the figures under (default: the one training ran
     /// with); see `gems train --help`.
     #[arg(long, value_enum)]
@@ -74,7 +86,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..Default::default()
     };
     let scene = gems_eval::open_scene_for(&output, &args.scene, &opts)?;
-    let mut data = gems_eval::eval_data_from_scene(&output, &scene)?;
+    let frame = match args.held_out_frame {
+        FrameArg::Initial => gems_eval::HeldOutFrame::Initial,
+        FrameArg::Trained => gems_eval::HeldOutFrame::Trained,
+    };
+    let mut data = gems_eval::eval_data_from_scene_in(&output, &scene, frame)?;
     gems_pipeline::attach_edi(&mut data, &output, &args.output)?;
     let lpips = if args.lpips.is_empty() {
         tracing::warn!("no --lpips weights given: LPIPS will be reported as absent");
