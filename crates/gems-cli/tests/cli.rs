@@ -969,7 +969,7 @@ fn bench_real_runs_the_rows_under_the_protocol_and_reads_finished_rows_back() {
         "{table}"
     );
     assert!(
-        table.contains("naive 3DGS (n = 1), dataset's poses")
+        table.contains("naive 3DGS (n = 1, poses fixed), dataset's poses")
             && table.contains("gems, dataset's poses"),
         "{table}"
     );
@@ -994,6 +994,9 @@ fn bench_real_runs_the_rows_under_the_protocol_and_reads_finished_rows_back() {
         assert_eq!(what.protocol.as_deref(), Some("deblur-nerf-real"));
         assert_eq!((what.downscale, what.hold, what.steps), (4, Some(7), 10));
         assert_eq!(what.virtual_views, n);
+        let cfg =
+            gems_train::TrainConfig::from_toml_file(&out.join(row).join("config.toml")).unwrap();
+        assert_eq!(cfg.pose.optimize, row == "dataset");
         assert!(
             what.init.starts_with("the dataset's COLMAP model"),
             "{}",

@@ -582,6 +582,7 @@ pub fn report_input(
             .collect(),
         grid,
         viewer: Some(viewer_scene(output, data)),
+        registration: None,
     }
 }
 

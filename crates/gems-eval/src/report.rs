@@ -43,6 +43,69 @@ pub struct ReportInput {
     pub grid: Vec<GridRow>,
     /// The interactive 3D view (also written alone as `viewer.html`), when there is a scene.
     pub viewer: Option<crate::viewer::ViewerScene>,
+    /// The SfM's registration of each photo, when the run's initialisation made one.
+    pub registration: Option<Registration>,
+}
+
+/// The initialiser's account of each photo (the built-in SfM's `sfm_report.json`).
+#[derive(Clone, Debug, Default, serde::Deserialize)]
+pub struct Registration {
+    pub views: Vec<RegisteredPhoto>,
+    /// Plain sentences on dropped photos and what to try.
+    #[serde(default)]
+    pub advice: Vec<String>,
+}
+
+/// The built-in SfM's per-photo registration of a run (`<dir>/sfm/sfm_report.json`, what
+/// `gems train` writes when it runs the SfM on the user's photos), if it made one.
+pub fn read_registration(dir: &Path) -> Option<Registration> {
+    let text = std::fs::read_to_string(dir.join("sfm").join("sfm_report.json")).ok()?;
+    serde_json::from_str(&text)
+        .inspect_err(|e| tracing::warn!("sfm_report.json not read for the report: {e}"))
+        .ok()
+}
+
+/// One photo of [`Registration`].
+#[derive(Clone, Debug, serde::Deserialize)]
+pub struct RegisteredPhoto {
+    pub name: String,
+    pub registered: bool,
+    pub blur_px: f64,
+    pub points: usize,
+    pub reprojection_error_px: Option<f64>,
+    pub why_not: Option<String>,
+}
+
+/// The photos' registration table and the advice, when there is one.
+fn registration_section(html: &mut String, reg: &Option<Registration>) {
+    let Some(reg) = reg else { return };
+    let registered = reg.views.iter().filter(|v| v.registered).count();
+    let _ = writeln!(
+        html,
+        "<h2>Registration</h2>\n<p>The SfM registered {registered} of {} photos.</p>",
+        reg.views.len()
+    );
+    for line in &reg.advice {
+        let _ = writeln!(html, "<p><b>{}</b></p>", esc(line));
+    }
+    html.push_str(
+        "<table><tr><th>photo</th><th>registered</th><th>blur (px)</th><th>points seen</th>\
+         <th>reprojection error (px)</th><th>why not</th></tr>\n",
+    );
+    for v in &reg.views {
+        let _ = writeln!(
+            html,
+            "<tr><td>{}</td><td>{}</td><td>{:.1}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            esc(&v.name),
+            if v.registered { "yes" } else { "no" },
+            v.blur_px,
+            v.points,
+            v.reprojection_error_px
+                .map_or("—".to_owned(), |e| format!("{e:.2}")),
+            esc(v.why_not.as_deref().unwrap_or(""))
+        );
+    }
+    html.push_str("</table>\n");
 }
 
 const PLOT_W: u32 = 640;
@@ -330,6 +393,7 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<PathBuf, EvalErro
     header_section(&mut html, input);
     viewer_section(&mut html, dir, input)?;
     metrics_section(&mut html, &input.metrics);
+    registration_section(&mut html, &input.registration);
     curves_section(&mut html, &fig_dir, input)?;
     trajectory_section(&mut html, &fig_dir, input)?;
     grid_section(&mut html, &fig_dir, input)?;

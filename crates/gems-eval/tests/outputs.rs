@@ -337,8 +337,27 @@ fn report_writes_html_and_figures() {
             gt: Some(img(0.9)),
         }],
         viewer: None,
+        registration: Some(report::Registration {
+            views: vec![report::RegisteredPhoto {
+                name: "blurred_<9>.png".into(),
+                registered: false,
+                blur_px: 61.5,
+                points: 0,
+                reprojection_error_px: None,
+                why_not: Some("much more blurred than the others".into()),
+            }],
+            advice: vec!["1 of 1 photos were not registered".into()],
+        }),
     };
     let html_path = write_report(dir.path(), &input).unwrap();
+    let html_text = std::fs::read_to_string(&html_path).unwrap();
+    assert!(
+        html_text.contains("blurred_&lt;9&gt;.png")
+            && html_text.contains("61.5")
+            && html_text.contains("1 of 1 photos were not registered")
+            && html_text.contains("much more blurred"),
+        "the registration table"
+    );
     let html = std::fs::read_to_string(&html_path).unwrap();
     assert!(
         html.contains("&lt;v0&gt;")

@@ -140,6 +140,17 @@ fn known_focal_is_kept_and_outputs_are_written() {
         assert!(report.get(key).is_some(), "missing {key}");
     }
     assert_eq!(report["registered"], 6);
+    // One line per photo: registered, blur, points seen, reprojection error.
+    let views = report["views"].as_array().unwrap();
+    assert_eq!(views.len(), 6);
+    for v in views {
+        assert_eq!(v["registered"], true);
+        assert!(v["blur_px"].as_f64().unwrap() > 0.0, "{v}");
+        assert!(v["points"].as_u64().unwrap() > 10, "{v}");
+        assert!(v["reprojection_error_px"].as_f64().unwrap() < 2.0, "{v}");
+        assert!(v["why_not"].is_null());
+    }
+    assert!(report["advice"].as_array().unwrap().is_empty());
     let png = image::open(dir.path().join("sfm_topview.png")).unwrap();
     assert_eq!(png.width(), 800);
 }
@@ -291,4 +302,34 @@ fn missing_colmap_binary_is_a_clear_error() {
     let e =
         gems_init::sfm::run_colmap_cli(dir.path(), &dir.path().join("work"), &opts).unwrap_err();
     assert!(e.to_string().contains("could not start"), "{e}");
+}
+
+#[test]
+fn a_photo_of_something_else_is_dropped_with_a_reason_and_advice() {
+    let s = common::scene(6, 200, 150, 1, 0.12, 7);
+    let mut images = s.images.clone();
+    // Random texture: keypoints everywhere, nothing in common with the scene.
+    let mut state = 12345u32;
+    let noise = image::RgbImage::from_fn(200, 150, |_, _| {
+        state = state.wrapping_mul(1664525).wrapping_add(1013904223);
+        let v = (state >> 24) as u8;
+        image::Rgb([v, v, v])
+    });
+    images.push(SfmImage {
+        name: "zz_other.png".into(),
+        image: noise,
+    });
+    let r = run_sfm(&images, &SfmOptions::default()).expect("sfm");
+    assert_eq!(r.stats.registered, 6, "{:?}", r.stats.unregistered);
+    let v = r.stats.views.last().unwrap();
+    assert_eq!(v.name, "zz_other.png");
+    assert!(!v.registered && v.points == 0 && v.reprojection_error_px.is_none());
+    let why = v.why_not.as_deref().unwrap();
+    assert!(why.contains("overlap") || why.contains("blurred"), "{why}");
+    assert!(
+        r.stats.advice[0].starts_with("1 of 7 photos were not registered")
+            && r.stats.advice[0].contains("zz_other.png"),
+        "{:?}",
+        r.stats.advice
+    );
 }

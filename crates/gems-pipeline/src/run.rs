@@ -531,10 +531,9 @@ fn evaluate_and_report(
     gems_eval::write_metrics_json(&job.output.join("metrics.json"), &eval.metrics)?;
     gems_eval::write_trajectories(job.output, output)?;
     gems_eval::write_renders_on(engine, job.output, output, &data, &eval)?;
-    let report = gems_eval::write_report(
-        job.output,
-        &gems_eval::report_input(output, &data, &eval, 4),
-    )?;
+    let mut input = gems_eval::report_input(output, &data, &eval, 4);
+    input.registration = gems_eval::report::read_registration(job.output);
+    let report = gems_eval::write_report(job.output, &input)?;
     Ok((report, eval.metrics))
 }
 

@@ -130,10 +130,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     write_metrics_json(&args.output.join("metrics.json"), &eval.metrics)?;
     write_trajectories(&args.output, &output)?;
     gems_eval::write_renders_on(&mut engine, &args.output, &output, &data, &eval)?;
-    let report = write_report(
-        &args.output,
-        &gems_eval::report_input(&output, &data, &eval, args.grid_rows),
-    )?;
+    let mut input = gems_eval::report_input(&output, &data, &eval, args.grid_rows);
+    input.registration = gems_eval::report::read_registration(&args.output);
+    let report = write_report(&args.output, &input)?;
     super::print_splits(&eval.metrics);
     println!("report: {}", report.display());
     Ok(())

@@ -116,8 +116,20 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
         s.working_size,
         s.seconds
     );
-    if !s.unregistered.is_empty() {
-        println!("unregistered: {}", s.unregistered.join(", "));
+    println!("photo                        registered  blur px  points  error px");
+    for v in &s.views {
+        println!(
+            "{:<28} {:<11} {:>7.1} {:>7} {:>9}",
+            v.name,
+            if v.registered { "yes" } else { "no" },
+            v.blur_px,
+            v.points,
+            v.reprojection_error_px
+                .map_or("—".to_owned(), |e| format!("{e:.2}"))
+        );
+    }
+    for line in &s.advice {
+        println!("{line}");
     }
     println!("written to {}", args.output.display());
     Ok(())

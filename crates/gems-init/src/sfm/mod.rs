@@ -222,6 +222,64 @@ pub struct SfmStats {
     /// Median motion-blur length estimated from the images (full-resolution px), which orders
     /// the working sizes tried.
     pub blur_px_estimate: f64,
+    /// One entry per input photo, in input order: what the user can act on.
+    pub views: Vec<ViewReport>,
+    /// Plain sentences on the photos that were dropped and what to try (empty when every photo
+    /// registered).
+    pub advice: Vec<String>,
+}
+
+/// One photo in the SfM's report.
+#[derive(Clone, Debug, Serialize)]
+pub struct ViewReport {
+    pub name: String,
+    pub registered: bool,
+    /// This photo's estimated motion-blur length, full-resolution px.
+    pub blur_px: f64,
+    /// Reconstructed points it observes.
+    pub points: usize,
+    /// Mean reprojection error of those observations, full-resolution px (`None`: none).
+    pub reprojection_error_px: Option<f64>,
+    /// Why it was not registered, in words (`None` when it was).
+    pub why_not: Option<String>,
+}
+
+/// Why each unregistered view of `stats` was dropped, and the advice sentences: a textureless
+/// photo; one much more blurred than the others (over twice the median blur); else too little
+/// overlap with the registered photos.
+fn explain_unregistered(stats: &mut SfmStats, textureless: &[String]) {
+    let median = stats.blur_px_estimate;
+    let mut dropped = Vec::new();
+    for v in stats.views.iter_mut().filter(|v| !v.registered) {
+        let why = if textureless.contains(&v.name) {
+            "too little texture: fewer than 8 keypoints at every working size".to_owned()
+        } else if median > 0.0 && v.blur_px > 2.0 * median {
+            format!(
+                "much more blurred than the others ({:.0} px against a median of {:.0} px)",
+                v.blur_px, median
+            )
+        } else {
+            "too little overlap with the registered photos: too few of its points could be \
+             matched and placed"
+                .to_owned()
+        };
+        dropped.push(format!("{} ({why})", v.name));
+        v.why_not = Some(why);
+    }
+    if !dropped.is_empty() {
+        stats.advice.push(format!(
+            "{} of {} photos were not registered and will not be trained on: {}.",
+            dropped.len(),
+            stats.total,
+            dropped.join("; ")
+        ));
+        stats.advice.push(
+            "To keep them: take photos closer together so that each overlaps its neighbours by \
+             more than half, pass --focal if the camera's focal length in pixels is known, or \
+             try a smaller working size (--working-size 128,96,64) for heavy blur."
+                .into(),
+        );
+    }
 }
 
 /// The reconstruction: camera, views (in input order), points, diagnostics.
@@ -289,7 +347,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         .map(|im| Gray::from_rgb(&im.image))
         .collect();
     check_identical(images, &grays)?;
-    let (blur, sizes) = working_sizes_by_blur(&grays, long, opts);
+    let (blurs, blur, sizes) = working_sizes_by_blur(&grays, long, opts);
     tracing::info!(blur_px = blur, working_sizes = ?sizes, "estimated motion blur");
 
     let mut best: Option<Attempt> = None;
@@ -379,6 +437,13 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     result.stats.seconds_features = t_feat;
     result.stats.seconds_reconstruction = t_rec;
     result.stats.blur_px_estimate = blur;
+    for (v, b) in result.stats.views.iter_mut().zip(&blurs) {
+        v.blur_px = f64::from(*b);
+    }
+    explain_unregistered(&mut result.stats, textureless.as_deref().unwrap_or(&[]));
+    for line in &result.stats.advice {
+        tracing::warn!("{line}");
+    }
     if result.stats.registered < 2 {
         return Err(SfmError::TooFewRegistered {
             registered: result.stats.registered,
@@ -393,10 +458,15 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
 /// the size where the blur is about [`TARGET_BLUR_PX`] first, then the others by distance (in
 /// scale) from it. Too fine a level leaves long smears that bias matching and let the camera
 /// path bend, too coarse a level leaves too few pixels.
-fn working_sizes_by_blur(grays: &[Gray], long: f64, opts: &SfmOptions) -> (f64, Vec<u32>) {
-    let mut blurs: Vec<f32> = grays.par_iter().map(features::estimate_blur_px).collect();
-    blurs.sort_by(|a, b| a.total_cmp(b));
-    let blur = blurs[blurs.len() / 2] as f64;
+fn working_sizes_by_blur(
+    grays: &[Gray],
+    long: f64,
+    opts: &SfmOptions,
+) -> (Vec<f32>, f64, Vec<u32>) {
+    let blurs: Vec<f32> = grays.par_iter().map(features::estimate_blur_px).collect();
+    let mut sorted = blurs.clone();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let blur = sorted[sorted.len() / 2] as f64;
     let target_ws = if blur > 0.0 {
         long * TARGET_BLUR_PX / blur
     } else {
@@ -407,7 +477,7 @@ fn working_sizes_by_blur(grays: &[Gray], long: f64, opts: &SfmOptions) -> (f64, 
         let d = |s: u32| (s as f64 / target_ws).ln().abs();
         d(a).total_cmp(&d(b)).then(b.cmp(&a))
     });
-    (blur, sizes)
+    (blurs, blur, sizes)
 }
 
 /// Fewer keypoints than this at every working size make a view textureless.

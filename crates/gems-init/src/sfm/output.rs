@@ -58,6 +58,8 @@ pub(crate) fn assemble(
         .collect();
     let mut points = Vec::new();
     let (mut err_sum, mut err_n) = (0.0, 0usize);
+    // Per view: the sum and count of its observations' reprojection errors.
+    let mut per_view = vec![(0.0f64, 0usize); views.len()];
     for t in &rec.tracks {
         let Some(x) = t.xyz else { continue };
         let used: Vec<_> = t
@@ -77,6 +79,8 @@ pub(crate) fn assemble(
             let pose = rec.poses[o.view].expect("registered");
             let e = (rec.k.project(&pose.act(&x)) - o.xy).norm() / scale;
             perr += e;
+            per_view[o.view].0 += e;
+            per_view[o.view].1 += 1;
             let c = sample_rgb(&images[o.view].image, full.x, full.y);
             for k in 0..3 {
                 rgb[k] += c[k];
@@ -122,6 +126,19 @@ pub(crate) fn assemble(
         seconds_features: 0.0,
         seconds_reconstruction: 0.0,
         blur_px_estimate: 0.0,
+        views: views
+            .iter()
+            .zip(&per_view)
+            .map(|(v, &(sum, n))| super::ViewReport {
+                name: v.name.clone(),
+                registered: v.pose.is_some(),
+                blur_px: 0.0,
+                points: n,
+                reprojection_error_px: (n > 0).then(|| sum / n as f64),
+                why_not: None,
+            })
+            .collect(),
+        advice: Vec::new(),
     };
     SfmResult {
         camera,
