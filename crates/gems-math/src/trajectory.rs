@@ -300,6 +300,35 @@ pub fn off_centre_energy(
     weight * r.norm_squared()
 }
 
+/// Anchor energy of the poses Δ(u_k) at `times`: ‖(1/n) Σ_k Log Δ(u_k)‖², the squared distance
+/// of the exposure's mean pose from the initial camera (Δ = identity). An SfM run on the blurry
+/// photos places each camera near the mean of its exposure; when those cameras are accurate the
+/// energy keeps the trained exposure there, where the Gaussians' frame was set, instead of
+/// letting every path drift by a shared offset that the photometric loss cannot see (the gauge
+/// of the mean pose). 0 weight: free paths (the GeMS paper).
+///
+/// Adds `weight` × its gradient with respect to the knots to `knot_grads` (one [ρ; φ] per knot)
+/// and returns `weight` × the energy.
+pub fn anchor_energy(
+    traj: &Trajectory,
+    times: &[f64],
+    weight: f64,
+    knot_grads: &mut [[f64; 6]],
+) -> f64 {
+    if times.is_empty() || weight == 0.0 {
+        return 0.0;
+    }
+    let logs: Vec<Vector6<f64>> = times.iter().map(|&u| traj.eval(u).log()).collect();
+    let inv_n = 1.0 / times.len() as f64;
+    let c = logs.iter().sum::<Vector6<f64>>() * inv_n;
+    // ∂E/∂ξ_k = 2c/n, through d Log(Δ Exp(δ)) / dδ = J_r⁻¹(Log Δ).
+    for (&u, xi) in times.iter().zip(&logs) {
+        let g = se3_right_jacobian_inv(xi).transpose() * c * (2.0 * inv_n * weight);
+        traj.accumulate_knot_gradients(u, &std::array::from_fn(|i| g[i]), knot_grads);
+    }
+    weight * c.norm_squared()
+}
+
 /// Replaces the knots by their least-squares straight line: knot j (of K) becomes m + s·(t_j − ½),
 /// t_j = j/(K−1), with m the knots' mean and s the least-squares slope, each of the six
 /// coordinates on its own. Knots already on such a line are left unchanged.

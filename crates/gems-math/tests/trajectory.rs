@@ -451,3 +451,28 @@ fn straight_knots_give_a_constant_speed_path() {
         }
     }
 }
+
+/// The anchor energy's knot gradient against central finite differences, for every kind; it
+/// vanishes for a path centred on the initial camera and grows with a shared offset.
+#[test]
+fn anchor_gradient_matches_finite_differences_and_measures_the_offset() {
+    assert_knot_gradient_matches_finite_differences(anchor_energy);
+    let ts = times(9);
+    let line = |a: f64, off: f64| -> [f64; 6] { [a + off, 0.5 * a, 0.0, 0.0, 0.0, 0.0] };
+    let centred = Trajectory::new(
+        TrajectoryKind::Linear,
+        vec![line(-0.1, 0.0), line(0.1, 0.0)],
+    )
+    .unwrap();
+    assert!(anchor_energy(&centred, &ts, 1.0, &mut [[0.0; 6]; 2]) < 1e-24);
+    let shifted = Trajectory::new(
+        TrajectoryKind::Linear,
+        vec![line(-0.1, 0.2), line(0.1, 0.2)],
+    )
+    .unwrap();
+    let e = anchor_energy(&shifted, &ts, 1.0, &mut [[0.0; 6]; 2]);
+    assert!((e - 0.04).abs() < 1e-9, "{e}");
+    let mut zero = vec![[0.0; 6]; 2];
+    assert_eq!(anchor_energy(&shifted, &ts, 0.0, &mut zero), 0.0);
+    assert_eq!(zero, vec![[0.0; 6]; 2]);
+}

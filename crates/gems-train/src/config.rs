@@ -116,6 +116,11 @@ pub struct PoseConfig {
     /// ground-truth poses and from a model made on a first pass's renders use
     /// `init.accurate_poses_straight_fraction` instead.
     pub straight_fraction: f64,
+    /// Weight of the anchor energy ‖mean_k Log Δ(u_k)‖² ([`gems_math::anchor_energy`]), added
+    /// to the loss: it holds each exposure's mean pose on its initial camera, so that accurate
+    /// initial cameras (a dataset's COLMAP model) are not carried off by a shared drift of the
+    /// paths. 0 = off (the GeMS paper), the default (BENCHMARKS.md, "Real data: blurball").
+    pub anchor_weight: f64,
 }
 
 impl Default for PoseConfig {
@@ -131,6 +136,7 @@ impl Default for PoseConfig {
             off_centre_weight: 10.0,
             off_centre_target: gems_math::PathCentre::Mean,
             straight_fraction: 0.0,
+            anchor_weight: 0.0,
         }
     }
 }
@@ -414,6 +420,9 @@ impl TrainConfig {
         }
         if !(self.pose.uneven_speed_weight.is_finite() && self.pose.uneven_speed_weight >= 0.0) {
             return Err("pose.uneven_speed_weight must be finite and >= 0".into());
+        }
+        if !(self.pose.anchor_weight.is_finite() && self.pose.anchor_weight >= 0.0) {
+            return Err("pose.anchor_weight must be finite and >= 0".into());
         }
         if !(self.pose.off_centre_weight.is_finite() && self.pose.off_centre_weight >= 0.0) {
             return Err("pose.off_centre_weight must be finite and >= 0".into());

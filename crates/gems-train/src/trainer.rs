@@ -534,6 +534,12 @@ impl Trainer {
                 self.cfg.pose.off_centre_weight,
                 &mut self.knot_grads,
             ) as f32;
+            loss += gems_math::anchor_energy(
+                &traj,
+                &self.times,
+                self.cfg.pose.anchor_weight,
+                &mut self.knot_grads,
+            ) as f32;
         }
         self.pose_update(v, step);
 
