@@ -4,15 +4,19 @@
 //! crates: argument parsing here, the work in `gems-*`.
 
 mod commands;
+mod console;
 
 use clap::{Parser, Subcommand};
-use tracing_subscriber::EnvFilter;
 
 #[derive(Parser)]
 #[command(name = "gems", version, about, long_about = None)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// More detail on the console: -v adds DEBUG lines with timestamps and module paths, -vv
+    /// everything. Each run's full log is in `gems.log` in its output folder either way.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
 }
 
 #[derive(Subcommand)]
@@ -48,15 +52,9 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        // Escape codes only for a person at a terminal, never into a log file or pipe.
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
+    quiet_vulkan_device_select();
     let cli = Cli::parse();
+    console::init(cli.verbose);
     let result = match cli.command {
         Command::Demo(a) => commands::demo::run(a),
         Command::BenchQuality(a) => commands::bench_quality::run(a),
@@ -74,9 +72,30 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", error_chain(&e));
+            tracing::error!("{}", error_chain(&e));
             std::process::ExitCode::FAILURE
         }
+    }
+}
+
+/// Turns Mesa's Vulkan device-selection layer off when there is no desktop session to select a
+/// device for. Probing for a GPU loads that implicit layer, and with `XDG_RUNTIME_DIR` unset
+/// (a server, a container, CI) it asks Wayland for the display's GPU and prints "error:
+/// XDG_RUNTIME_DIR is invalid or not set in the environment." twice, though nothing failed.
+/// wgpu chooses the adapter itself, so the layer has nothing to add there; `NODEVICE_SELECT=1`
+/// is the layer's own off switch (Mesa's `VkLayer_MESA_device_select.json`,
+/// `disable_environment`). A user who sets `NODEVICE_SELECT` keeps their value.
+fn quiet_vulkan_device_select() {
+    let runtime_dir_ok = std::env::var_os("XDG_RUNTIME_DIR")
+        .is_some_and(|d| !d.is_empty() && std::path::Path::new(&d).is_dir());
+    if runtime_dir_ok || std::env::var_os("NODEVICE_SELECT").is_some() {
+        return;
+    }
+    // SAFETY: called first thing in `main`, before any thread exists, so no other thread can
+    // read or write the environment concurrently (`std::env::set_var`'s safety condition).
+    #[allow(unsafe_code)]
+    unsafe {
+        std::env::set_var("NODEVICE_SELECT", "1");
     }
 }
 

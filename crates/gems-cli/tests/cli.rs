@@ -8,25 +8,11 @@
 //! the subprocess calls, the import of the largest model, training and evaluation from it — is
 //! the real code path.
 
+mod common;
+
+use common::{clip_of, deblur_nerf_real, gems, ok, read_only, s, snapshot, stdout, tiny_scene};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-
-fn gems(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gems"))
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("the gems binary runs")
-}
-
-fn ok(out: &Output) {
-    assert!(
-        out.status.success(),
-        "gems failed:\nstdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 /// The command failed with one clear error that mentions `needle`, not a panic.
 fn fails_clearly(out: &Output, needle: &str) {
@@ -48,18 +34,6 @@ fn train(scene: &Path, out: &Path, extra: &[&str]) -> Output {
     ];
     args.extend_from_slice(extra);
     gems(&args)
-}
-
-fn tiny_scene(dir: &Path) -> PathBuf {
-    let scene = dir.join("scene");
-    ok(&gems(&[
-        "synth",
-        "--preset",
-        "tiny",
-        "-o",
-        scene.to_str().unwrap(),
-    ]));
-    scene
 }
 
 /// A stand-in for the `colmap` executable whose mapper "reconstructs" `model`.
@@ -221,93 +195,6 @@ fn sfm_tracking_density_flags_reach_the_sfm() {
         "0.9",
     ]);
     fails_clearly(&bad, "grid_spacing");
-}
-
-/// Every file and folder under `root` with its content hash (FNV-1a), to prove a command left a
-/// scene exactly as it was.
-fn snapshot(root: &Path) -> std::collections::BTreeMap<PathBuf, u64> {
-    let mut out = std::collections::BTreeMap::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p.clone());
-                out.insert(p, 0);
-            } else {
-                let h = std::fs::read(&p)
-                    .unwrap()
-                    .iter()
-                    .fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
-                        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-                    });
-                out.insert(p, h);
-            }
-        }
-    }
-    out
-}
-
-/// Makes every file and folder under `root` read-only (a no-op for root, which is why the
-/// snapshot comparison is the real proof).
-fn read_only(root: &Path) {
-    use std::os::unix::fs::PermissionsExt;
-    for (p, _) in snapshot(root) {
-        let mode = if p.is_dir() { 0o555 } else { 0o444 };
-        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(mode)).unwrap();
-    }
-    std::fs::set_permissions(root, std::fs::Permissions::from_mode(0o555)).unwrap();
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn stdout(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-/// A Deblur-NeRF real scene as redistributed, made from a generated one at 4× the training size:
-/// JPG `images/`, PNG `images_4/` with the same stems, `poses_bounds.npy`, `sparse/0` (naming the
-/// PNGs, as `Dojizz/NGP-Deblur-NeRF:blurball/sparse/0` does) and `hold=7`.
-fn deblur_nerf_real(dir: &Path) -> PathBuf {
-    let synth = dir.join("synth");
-    ok(&gems(&[
-        "synth",
-        "--preset",
-        "tiny",
-        "--width",
-        "192",
-        "--height",
-        "128",
-        "--no-events",
-        "-o",
-        s(&synth),
-    ]));
-    let real = dir.join("blurball");
-    for e in std::fs::read_dir(synth.join("images")).unwrap() {
-        let p = e.unwrap().path();
-        let stem = p.file_stem().unwrap().to_str().unwrap().to_owned();
-        let img = gems_data::load_image(&p).unwrap();
-        gems_data::image::save_image_auto(&real.join(format!("images/{stem}.jpg")), &img).unwrap();
-        let small = gems_data::image::downscale_area(&img, 48, 32);
-        gems_data::save_png(&real.join(format!("images_4/{stem}.png")), &small).unwrap();
-    }
-    std::fs::copy(
-        synth.join("poses_bounds.npy"),
-        real.join("poses_bounds.npy"),
-    )
-    .unwrap();
-    let model = gems_data::colmap::read_model(&synth.join("gt/sparse/0")).unwrap();
-    assert!(model.images.iter().all(|im| im.name.ends_with(".png")));
-    gems_data::colmap::write_model(
-        &real.join("sparse/0"),
-        &model,
-        gems_data::colmap::ModelFormat::Binary,
-    )
-    .unwrap();
-    gems_data::write_hold_marker(&real, 7).unwrap();
-    real
 }
 
 #[test]
@@ -1067,19 +954,6 @@ fn bursts_and_camera_exports_from_a_trained_folder() {
     );
 }
 
-/// A short MP4 of a generated scene's blurry frames, made with ffmpeg (which `.ci/run`
-/// installs).
-fn clip_of(scene: &Path, out: &Path) {
-    let status = Command::new("ffmpeg")
-        .args(["-v", "error", "-y", "-framerate", "8", "-i"])
-        .arg(scene.join("images/%03d.png"))
-        .args(["-c:v", "libx264", "-pix_fmt", "yuv420p"])
-        .arg(out)
-        .status()
-        .expect("ffmpeg is installed (.ci/run installs it)");
-    assert!(status.success());
-}
-
 #[test]
 fn a_video_is_a_scene_of_ordered_frames_and_a_fly_through_is_a_video() {
     let dir = tempfile::tempdir().unwrap();
@@ -1174,5 +1048,112 @@ fn a_video_is_a_scene_of_ordered_frames_and_a_fly_through_is_a_video() {
             &["--ffmpeg", "/nonexistent/ffmpeg"],
         ),
         "install ffmpeg",
+    );
+}
+
+/// `gems <args>` as a person runs it: no `RUST_LOG`, and no desktop session (`XDG_RUNTIME_DIR`
+/// unset, as on a server or in CI, where Mesa's device-select layer used to print two lines
+/// starting "error:" while `--device auto` probed for a GPU).
+fn gems_as_a_person(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gems"))
+        .args(args)
+        .env_remove("RUST_LOG")
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
+        .output()
+        .expect("the gems binary runs")
+}
+
+/// Whether `text` has a number with more than six digits after its decimal point.
+fn has_long_float(text: &str) -> bool {
+    let bytes = text.as_bytes();
+    (1..bytes.len()).any(|i| {
+        bytes[i] == b'.'
+            && bytes[i - 1].is_ascii_digit()
+            && bytes[i + 1..]
+                .iter()
+                .take_while(|b| b.is_ascii_digit())
+                .count()
+                > 6
+    })
+}
+
+#[test]
+fn the_console_is_short_and_readable_and_the_log_file_has_the_detail() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let run = dir.path().join("run");
+    let out = gems_as_a_person(&[
+        "train",
+        s(&scene),
+        "-o",
+        s(&run),
+        "--steps",
+        "30",
+        "--no-eval",
+    ]);
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    // Nothing failed, so nothing says "error"; no timestamps, module paths or 17-digit floats.
+    assert!(!err.to_lowercase().contains("error"), "{err}");
+    assert!(
+        !err.contains("gems_pipeline::") && !err.contains("Z  INFO"),
+        "{err}"
+    );
+    assert!(!has_long_float(&err), "{err}");
+    assert!(err.lines().count() <= 12, "a few lines per stage:\n{err}");
+    // The built-in SfM is named as such, not as "colmap (…/sfm/sparse/0)".
+    assert!(
+        err.contains("init built-in SfM on the blurry photos"),
+        "{err}"
+    );
+
+    // The log file keeps everything: timestamps, module paths, each step report at full
+    // precision, from before the output folder was known too.
+    let log = std::fs::read_to_string(run.join("gems.log")).unwrap();
+    assert!(
+        log.contains("==== gems ") && log.contains(" train "),
+        "{log}"
+    );
+    assert!(
+        log.contains("INFO gems_pipeline::init: structure from motion"),
+        "{log}"
+    );
+    assert!(log.contains("DEBUG gems_gpu::context"), "{log}");
+    assert!(
+        log.contains("DEBUG gems_train::trainer: train step=30"),
+        "{log}"
+    );
+    assert!(has_long_float(&log), "{log}");
+
+    // -v puts the detail on the console too, and a second command appends to the log.
+    let sfm = dir.path().join("sfm");
+    let out = gems_as_a_person(&["sfm", s(&scene), "-o", s(&sfm), "-v"]);
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("DEBUG gems_init::sfm"), "{err}");
+    let out = gems_as_a_person(&["sfm", s(&scene), "-o", s(&sfm)]);
+    ok(&out);
+    let log = std::fs::read_to_string(sfm.join("gems.log")).unwrap();
+    assert_eq!(log.matches("==== gems ").count(), 2, "{log}");
+
+    // A failure is one line that says so, and the log file has it too.
+    let out = gems_as_a_person(&[
+        "train",
+        s(&dir.path().join("no-such-scene")),
+        "-o",
+        s(&dir.path().join("failed")),
+    ]);
+    fails_clearly(&out, "no-such-scene");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        err.lines().filter(|l| l.starts_with("error: ")).count(),
+        1,
+        "{err}"
+    );
+    let log = std::fs::read_to_string(dir.path().join("failed").join("gems.log")).unwrap();
+    assert!(
+        log.contains("ERROR gems: ") && log.contains("no-such-scene"),
+        "{log}"
     );
 }

@@ -316,7 +316,7 @@ pub fn evaluate_views_with_progress(
     let mut poses = Vec::with_capacity(views.len());
     let mut scene = renderer.freeze(gaussians)?;
     for (i, v) in views.iter().enumerate() {
-        tracing::info!(view = %v.name, "evaluating view {}/{}", i + 1, views.len());
+        tracing::debug!(view = %v.name, "evaluating view {}/{}", i + 1, views.len());
         let k = &v.intrinsics;
         let (h, w) = (k.height as usize, k.width as usize);
         if v.gt.len() != h * w * 3 {

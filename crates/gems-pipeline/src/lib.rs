@@ -18,12 +18,15 @@
 //! [`train_scene`] runs all four from a [`TrainRequest`]; [`train_and_report`] runs 2–4 from an
 //! already resolved [`InitMode`].
 //!
-//! Logs go through `tracing`. Progress bars (indicatif, on stderr) are drawn only when the
-//! request asks for them (`progress: true`, what the command line does); a library user leaves
-//! them off and reads the step reports from the logs.
+//! Logs go through `tracing`: what each stage does and its figures at INFO, per-item detail
+//! (each training report, each evaluated view) at DEBUG. Progress bars (indicatif, on stderr,
+//! one [`progress`] group a log writer can lift out of the way) are drawn only when the request
+//! asks for them (`progress: true`, what the command line does); a library user leaves them off
+//! and reads the step reports from the DEBUG logs.
 
 mod error;
 mod init;
+pub mod progress;
 mod protocol;
 mod run;
 

@@ -10,7 +10,6 @@ use gems_train::TrainConfig;
 use gems_train::Trainer;
 use gems_train::{InitMode, prepare_input};
 use gems_train::{TrainOutput, has_checkpoint, load_checkpoint, save_checkpoint};
-use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::PipelineError;
 use crate::init::{
@@ -230,6 +229,9 @@ fn describe_init(init: &InitRequest, scene: &gems_data::Scene) -> String {
         Init::Sfm => format!("built-in SfM on {images}"),
         Init::ColmapCli => format!("COLMAP ({}) on {images}", init.colmap_binary.display()),
         Init::Colmap => match (&init.colmap_model, &scene.sfm_dir, scene.sfm_match) {
+            (Some(dir), _, _) if gems_init::sfm::is_builtin_model(dir) => {
+                format!("the built-in SfM's model {}", dir.display())
+            }
             (Some(dir), _, _) => format!("the COLMAP model {}", dir.display()),
             (None, Some(dir), Some(m)) => format!(
                 "the dataset's COLMAP model {} ({} of {} views, images matched {})",
@@ -325,16 +327,6 @@ fn accept_rerun(
     Ok(false)
 }
 
-/// A progress bar of `len` units drawn with `template`, or a hidden one.
-fn progress_bar(show: bool, len: usize, template: &'static str) -> ProgressBar {
-    if !show {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::new(len as u64);
-    bar.set_style(ProgressStyle::with_template(template).expect("static progress template"));
-    bar
-}
-
 /// Trains, writes `point_cloud.ply` (input frame), the model, and — unless disabled — metrics,
 /// trajectories and `report.html`.
 pub fn train_and_report(mut job: TrainJob<'_>) -> Result<RunOutcome, PipelineError> {
@@ -379,7 +371,15 @@ fn train_and_export(
         source,
     })?;
     let pose_model = pose_model_of(&job.mode, &scene);
-    let mut trainer = start_trainer(&scene, &job.mode, job.cfg.clone(), job.resume, job.output)?;
+    let described_init = job.run.as_ref().map(|r| r.init.as_str());
+    let mut trainer = start_trainer(
+        &scene,
+        &job.mode,
+        described_init,
+        job.cfg.clone(),
+        job.resume,
+        job.output,
+    )?;
     trainer.set_engine(engine);
     gems_fs::write_atomic(
         &job.output.join("config.toml"),
@@ -425,10 +425,13 @@ fn pose_model_of(mode: &InitMode, scene: &gems_data::Scene) -> Option<PathBuf> {
 }
 
 /// A trainer resumed from the checkpoint in `output` (with the configuration it was written
-/// with) when asked and there is one, else a fresh one with `cfg`.
+/// with) when asked and there is one, else a fresh one with `cfg`. `described_init` is the
+/// initialisation as the run's description words it, logged instead of `mode`'s label (which
+/// says "colmap" for the built-in SfM's model too).
 fn start_trainer(
     scene: &gems_data::Scene,
     mode: &InitMode,
+    described_init: Option<&str>,
     cfg: TrainConfig,
     resume: bool,
     output: &Path,
@@ -453,7 +456,12 @@ fn start_trainer(
         );
     }
     let input = prepare_input(scene, mode, &cfg)?;
-    tracing::info!(views = input.views.len(), gaussians = input.gaussians.len(), init = %input.init_label, "training");
+    tracing::info!(
+        views = input.views.len(),
+        gaussians = input.gaussians.len(),
+        init = described_init.unwrap_or(&input.init_label),
+        "training"
+    );
     Ok(Trainer::new(cfg, input)?)
 }
 
@@ -463,16 +471,16 @@ fn train_with_checkpoints(
     output: &Path,
     progress: bool,
 ) -> Result<(), PipelineError> {
-    let bar = progress_bar(
+    let bar = crate::progress::bar(
         progress,
         trainer.config().steps,
-        "{bar:30} {pos}/{len} steps  {msg}  {per_sec}  ETA {eta}",
+        "training {wide_bar} {pos}/{len} steps  {msg}  {rate}  ETA {eta}",
     );
     bar.set_position(trainer.steps_done() as u64);
     trainer.run(|t, r| {
         bar.set_position(r.step as u64);
         bar.set_message(format!(
-            "loss {:.4}  PSNR {:.2}  Gaussians {}",
+            "loss {:.3}  PSNR {:.1}  {} Gaussians",
             r.loss, r.psnr, r.gaussians
         ));
         let every = t.config().checkpoint_every;
@@ -512,10 +520,10 @@ fn evaluate_and_report(
         Some(gems_metrics::Lpips::load(job.lpips)?)
     };
     let eval_started = Instant::now();
-    let bar = progress_bar(
+    let bar = crate::progress::bar(
         job.progress,
         gems_eval::evaluation_units(&data),
-        "evaluating {bar:30} {pos}/{len} views  ETA {eta}",
+        "evaluating {wide_bar} {pos}/{len} views  ETA {eta}",
     );
     let eval = gems_eval::evaluate_output_on(
         engine,

@@ -307,7 +307,7 @@ fn write_scene(
     let text =
         serde_json::to_string_pretty(&details).map_err(|e| SynthError::Config(e.to_string()))?;
     write_text(&dir.join("synth.json"), &text)?;
-    tracing::info!(
+    tracing::debug!(
         "synth scene {}: {n} views {}x{}, {} events",
         final_dir.display(),
         k.width,

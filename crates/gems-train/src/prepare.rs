@@ -416,7 +416,7 @@ fn initial_points(
                     cfg.init.random_far * scene_scale,
                 ));
                 let extra = min_points - p.len();
-                tracing::info!(
+                tracing::debug!(
                     sfm_points = p.len(),
                     extra,
                     near,

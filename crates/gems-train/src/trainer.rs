@@ -796,7 +796,7 @@ impl Trainer {
         while !self.is_done() {
             let r = self.step()?;
             if r.step % self.cfg.log_every.max(1) == 0 || r.step == self.cfg.steps {
-                tracing::info!(
+                tracing::debug!(
                     step = r.step,
                     loss = r.loss,
                     psnr = r.psnr,

@@ -133,6 +133,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if out.exists() && std::fs::read_dir(out)?.next().is_some() {
         anyhow::bail!("{} exists and is not empty", out.display());
     }
+    crate::console::log_to(out)?;
     let base = match &args.config {
         Some(p) => TrainConfig::from_toml_file(p)?,
         None => TrainConfig::default(),

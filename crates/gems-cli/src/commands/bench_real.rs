@@ -184,6 +184,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("--device {}: {e}", args.device))?;
     let out = &args.output;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    crate::console::log_to(out)?;
     let scene = gems_data::open_scene(&args.scene, &gems_data::OpenOptions::default())
         .with_context(|| format!("opening {}", args.scene.display()))?;
     let base = match &args.config {

@@ -71,6 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         std::fs::remove_dir_all(out).with_context(|| format!("removing {}", out.display()))?;
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    crate::console::log_to(out)?;
 
     let synth = SynthConfig {
         seed: args.seed,
@@ -132,13 +133,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     cfg.mcmc.cap_max = args.cap_max;
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("invalid demo configuration: {e}"))?;
-    tracing::info!(steps = cfg.steps, init = %mode.label(), "3/3 training and evaluation");
-    let engine = super::open_engine(args.device)?;
     let init = match &mode {
         InitMode::Colmap(_) if args.events => "built-in SfM on the EDI-deblurred images (events)",
         InitMode::Colmap(_) => "built-in SfM on the blurry photos",
         _ => "ground-truth poses with noise (the built-in SfM was not used)",
     };
+    tracing::info!(steps = cfg.steps, init, "3/3 training and evaluation");
+    let engine = super::open_engine(args.device)?;
     let opened = gems_data::open_scene(&scene, &gems_data::OpenOptions::default())?;
     let description = gems_pipeline::describe_run(&opened, None, init.into(), &cfg, &engine);
     let run = train_and_report(TrainJob {

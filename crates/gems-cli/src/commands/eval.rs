@@ -70,6 +70,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.output.display()
         )
     })?;
+    crate::console::log_to(&args.output)?;
     let cache = args
         .cache_dir
         .clone()
@@ -108,10 +109,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         held_out = data.held_out.len(),
         "evaluating"
     );
-    let bar = indicatif::ProgressBar::new(gems_eval::evaluation_units(&data) as u64);
-    bar.set_style(indicatif::ProgressStyle::with_template(
-        "eval [{bar:30}] {pos}/{len} views  {msg}  ({elapsed}, ETA {eta})",
-    )?);
+    let bar = gems_pipeline::progress::bar(
+        true,
+        gems_eval::evaluation_units(&data),
+        "evaluating {wide_bar} {pos}/{len} views  {msg}  ETA {eta}",
+    );
     let mut engine = super::open_engine(args.device)?;
     let eval = gems_eval::evaluate_output_on(
         &mut engine,

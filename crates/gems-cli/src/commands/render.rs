@@ -269,10 +269,11 @@ fn bursts(args: &Args) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| args.input.join("bursts"));
     let mut engine = super::open_engine(args.device)?;
-    let bar = indicatif::ProgressBar::new(output.views.len() as u64);
-    bar.set_style(indicatif::ProgressStyle::with_template(
-        "bursts [{bar:30}] {pos}/{len} photos  {msg}",
-    )?);
+    let bar = gems_pipeline::progress::bar(
+        true,
+        output.views.len(),
+        "bursts {wide_bar} {pos}/{len} photos  {msg}",
+    );
     let n = gems_eval::export::write_bursts(&dir, &mut engine, &output, &mut |name| {
         bar.set_message(name.to_owned());
         bar.inc(1);
@@ -315,10 +316,11 @@ fn flythrough(args: &Args, kind: PathKind) -> anyhow::Result<()> {
         antialiased: args.antialiased,
         ..Default::default()
     };
-    let bar = indicatif::ProgressBar::new(poses.len() as u64);
-    bar.set_style(indicatif::ProgressStyle::with_template(
-        "fly-through [{bar:30}] {pos}/{len} frames  ETA {eta}",
-    )?);
+    let bar = gems_pipeline::progress::bar(
+        true,
+        poses.len(),
+        "fly-through {wide_bar} {pos}/{len} frames  ETA {eta}",
+    );
     for (i, c2w) in poses.iter().enumerate() {
         let cam = Camera::from_c2w(&k, c2w);
         let out = engine.forward(&output.gaussians, &[cam], &[args.background], &settings)?;

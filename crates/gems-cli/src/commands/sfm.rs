@@ -47,6 +47,7 @@ pub struct Args {
 }
 
 pub fn run(mut args: Args) -> anyhow::Result<()> {
+    crate::console::log_to(&args.output)?;
     args.scene = args.video.scene(&args.scene, &args.output)?;
     let focal = args.focal.or_else(|| {
         gems_data::exif::folder_focal(&args.scene).map(|f| {

@@ -134,6 +134,7 @@ pub fn resolve(
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    crate::console::log_to(&args.output)?;
     let mut cfg = match &args.config {
         Some(p) => TrainConfig::from_toml_file(p)?,
         None => TrainConfig::default(),

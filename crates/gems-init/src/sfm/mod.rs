@@ -40,7 +40,7 @@ mod tracking;
 
 pub use colmap_cli::{ColmapCliOptions, run_colmap_cli};
 pub use gems_data::colmap::SparseModel;
-pub use output::{draw_top_view, to_colmap_model, write_outputs};
+pub use output::{REPORT_FILE, draw_top_view, is_builtin_model, to_colmap_model, write_outputs};
 
 use features::{FeatureParams, Features, Gray};
 use rayon::prelude::*;
@@ -394,7 +394,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
                 working_size: ws,
                 scale,
             };
-            tracing::info!(
+            tracing::debug!(
                 working_size = ws,
                 focal_start = attempt.focal_start_px,
                 focal = attempt.recon.k.fx / scale,

@@ -292,16 +292,30 @@ pub fn draw_top_view(r: &SfmResult, size: u32) -> image::RgbImage {
     img
 }
 
+/// The per-photo registration report [`write_outputs`] puts beside `sparse/`.
+pub const REPORT_FILE: &str = "sfm_report.json";
+
+/// Whether the COLMAP model folder `model` is one [`write_outputs`] wrote: `<out>/sparse/0` with
+/// `<out>/sfm_report.json` beside it.
+pub fn is_builtin_model(model: &Path) -> bool {
+    model.ends_with(Path::new("sparse").join("0"))
+        && model
+            .parent()
+            .and_then(Path::parent)
+            .is_some_and(|out| out.join(REPORT_FILE).is_file())
+}
+
 /// Write `out_dir/sparse/0` (COLMAP binary), `out_dir/sfm_report.json` and
 /// `out_dir/sfm_topview.png`. Every file is written atomically.
 pub fn write_outputs(r: &SfmResult, out_dir: &Path) -> Result<(), SfmError> {
     let sparse = out_dir.join("sparse").join("0");
     colmap::write_model(&sparse, &to_colmap_model(r), ModelFormat::Binary)?;
+    let report = out_dir.join(REPORT_FILE);
     let json = serde_json::to_vec_pretty(&r.stats).map_err(|e| SfmError::Write {
-        path: out_dir.join("sfm_report.json"),
+        path: report.clone(),
         source: Box::new(e),
     })?;
-    gems_fs::write_atomic(&out_dir.join("sfm_report.json"), &json).map_err(SfmError::write)?;
+    gems_fs::write_atomic(&report, &json).map_err(SfmError::write)?;
     let png_path = out_dir.join("sfm_topview.png");
     let img = draw_top_view(r, 800);
     let mut bytes = Vec::new();
@@ -315,4 +329,20 @@ pub fn write_outputs(r: &SfmResult, out_dir: &Path) -> Result<(), SfmError> {
     })?;
     gems_fs::write_atomic(&png_path, &bytes).map_err(SfmError::write)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_model_is_the_built_in_sfms_when_its_report_is_beside_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let model = dir.path().join("sfm").join("sparse").join("0");
+        std::fs::create_dir_all(&model).unwrap();
+        assert!(!is_builtin_model(&model), "no report yet");
+        std::fs::write(dir.path().join("sfm").join(REPORT_FILE), "{}").unwrap();
+        assert!(is_builtin_model(&model));
+        assert!(!is_builtin_model(&dir.path().join("sfm").join("sparse")));
+    }
 }
