@@ -735,20 +735,21 @@ fn tiny_bench(out: &Path, extra: &[&str]) -> Output {
     gems(&args)
 }
 
-/// `gems bench-quality` on one tiny scene with a few steps: the four rows per seed in both
+/// `gems bench-quality` on one tiny scene with a few steps: the five rows per seed in both
 /// outputs, and a ceiling scene whose images are the sharp frames, without the blurry
 /// exposures' events.
 #[test]
-fn bench_quality_writes_the_four_rows() {
+fn bench_quality_writes_the_five_rows() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bench");
     ok(&tiny_bench(&out, &[]));
     let table = std::fs::read_to_string(out.join("quality.md")).unwrap();
     let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| 3 |")).collect();
-    assert_eq!(rows.len(), 4, "{table}");
+    assert_eq!(rows.len(), 5, "{table}");
     for (row, name) in rows.iter().zip([
         "blurry input",
         "GeMS, built-in SfM",
+        "GeMS, built-in SfM on the sharp frames",
         "GeMS, ground-truth poses",
         "sharp ceiling",
     ]) {
@@ -757,29 +758,40 @@ fn bench_quality_writes_the_four_rows() {
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("quality.json")).unwrap()).unwrap();
     let runs = json.as_array().unwrap();
-    assert_eq!(runs.len(), 4);
+    assert_eq!(runs.len(), 5);
+    let (sfm, sharp_sfm, gt) = (1, 2, 3);
     // Started from the ground truth, three steps at the default knot lr (3e-3) move the poses by
     // a few 1e-3 in the normalised frame (×7 in this scene's units): far nearer than the SfM's.
     let ape = |r: usize| runs[r]["ape_rmse"].as_f64().unwrap();
     assert!(
-        ape(2) < 0.05 && ape(2) < 0.5 * ape(1),
+        ape(gt) < 0.05 && ape(gt) < 0.5 * ape(sfm),
         "{} vs {}",
-        runs[2],
-        runs[1]
+        runs[gt],
+        runs[sfm]
     );
-    // Each row also gives the APE of the poses it started from: zero from the ground truth.
+    // Each row also gives the APE of the poses it started from: zero from the ground truth,
+    // positive from either SfM.
     let ape_init = |r: usize| runs[r]["ape_init_rmse"].as_f64().unwrap();
-    assert!(ape_init(2) < 1e-9 && ape_init(1) > 0.0, "{}", runs[1]);
+    assert!(ape_init(gt) < 1e-9 && ape_init(sfm) > 0.0, "{}", runs[sfm]);
+    assert!(ape_init(sharp_sfm) > 0.0, "{}", runs[sharp_sfm]);
+    // The sharp-frame row trained the blurry images from the model the SfM made of the sharp
+    // frames.
+    let m = gems_eval::read_metrics_json(&out.join("seed3/gems_sharp_sfm/metrics.json")).unwrap();
+    let init = m.run.unwrap().init;
+    assert!(
+        init.starts_with("the built-in SfM's model") && init.contains("sharp_sfm"),
+        "{init}"
+    );
     // And the relative rotation error over every pair of views: zero from the ground truth,
     // positive from the SfM.
     let rot_init = |r: usize| runs[r]["rotation_error_init_deg"].as_f64().unwrap();
-    assert!(rot_init(2) < 1e-6 && rot_init(1) > 0.0, "{}", runs[1]);
+    assert!(rot_init(gt) < 1e-6 && rot_init(sfm) > 0.0, "{}", runs[sfm]);
     assert!(
-        runs[2]["rotation_error_deg"].as_f64().unwrap() < 1.0,
+        runs[gt]["rotation_error_deg"].as_f64().unwrap() < 1.0,
         "{}",
-        runs[2]
+        runs[gt]
     );
-    assert!(rows[2].contains(" → "), "{}", rows[2]);
+    assert!(rows[gt].contains(" → "), "{}", rows[gt]);
     let sharp = out.join("seed3/sharp");
     let scene = out.join("seed3/scene");
     for e in std::fs::read_dir(scene.join("images_test")).unwrap() {

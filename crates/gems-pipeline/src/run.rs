@@ -144,7 +144,10 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                     lpips: &[],
                     engine: Engine::default(),
                     progress: req.progress,
-                    run: None,
+                    run: Some(gems_train::RunDescription {
+                        steps: first_steps,
+                        ..description.clone()
+                    }),
                     started,
                 },
                 engine,

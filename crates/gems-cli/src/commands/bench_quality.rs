@@ -3,14 +3,17 @@
 //! On `gems synth` scenes of several seeds, at one schedule, four rows per seed:
 //! 1. the blurry input against the sharp ground truth (where a user starts);
 //! 2. GeMS initialised by the built-in SfM on the blurry images;
-//! 3. GeMS initialised by the ground-truth poses;
-//! 4. the sharp ceiling: the same engine and schedule with n = 1 on the sharp mid-exposure frames,
+//! 3. GeMS initialised by the built-in SfM run on the **sharp** mid-exposure frames (what the
+//!    GeMS paper's comparators start from: COLMAP on sharp frames), trained on the blurry
+//!    images: how well training keeps accurate cameras accurate (APE before → after);
+//! 4. GeMS initialised by the ground-truth poses;
+//! 5. the sharp ceiling: the same engine and schedule with n = 1 on the sharp mid-exposure frames,
 //!    SfM on them, in one pass: the SfM again on a first pass's renders
 //!    (`init.sfm_rerun_fraction`) is there to undo what blur does to the SfM, and on sharp frames
 //!    it only shortens the last training (seed 7 at 3000 steps: 33.47 dB refined deblurring
 //!    with it, 34.37 dB in one pass; novel views 30.56 / 30.51 dB).
 //!
-//! `--rows` trains only some of 2–4 (e.g. the ceiling of a seed whose other rows were already
+//! `--rows` trains only some of 2–5 (e.g. the ceiling of a seed whose other rows were already
 //! run by `gems train`); the blurry-input row comes with either blurry run.
 //!
 //! Columns: deblurring at the trajectory midpoint and after the GeMS authors' 100-step pose
@@ -57,7 +60,7 @@ pub struct Args {
     #[arg(long, default_value = "auto")]
     pub device: gems_gpu::DeviceChoice,
     /// Which training rows to run, in the table's order whatever the order given here.
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [RowKind::Sfm, RowKind::Gt, RowKind::Ceiling])]
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [RowKind::Sfm, RowKind::SharpSfm, RowKind::Gt, RowKind::Ceiling])]
     pub rows: Vec<RowKind>,
 }
 
@@ -66,6 +69,8 @@ pub struct Args {
 pub enum RowKind {
     /// GeMS from the built-in SfM on the blurry images.
     Sfm,
+    /// GeMS on the blurry images from the built-in SfM run on the sharp frames.
+    SharpSfm,
     /// GeMS from the ground-truth poses.
     Gt,
     /// The sharp ceiling (n = 1 on the sharp frames, SfM on them).
@@ -158,7 +163,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         // Every row runs the whole pipeline a user's `gems train --init sfm|gt` runs (for the
         // SfM, a first pass and the SfM again on its renders when the configuration asks for
         // it; from ground truth, straight paths first).
-        let row = |name: &'static str, init: Init, scene: &Path, out: &Path, cfg: &TrainConfig| {
+        let row = |name: &'static str,
+                   init: gems_pipeline::InitRequest,
+                   scene: &Path,
+                   out: &Path,
+                   cfg: &TrainConfig| {
             tracing::info!(seed, run = name, "bench-quality run");
             let start = Instant::now();
             let run = gems_pipeline::train_scene(gems_pipeline::TrainRequest {
@@ -166,7 +175,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 output: out.to_path_buf(),
                 init: gems_pipeline::InitRequest {
                     focal_px: focal,
-                    ..gems_pipeline::InitRequest::new(init)
+                    ..init
                 },
                 cfg: cfg.clone(),
                 open: gems_data::OpenOptions::default(),
@@ -193,18 +202,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .then(|| {
                 row(
                     "GeMS, built-in SfM",
-                    Init::Sfm,
+                    gems_pipeline::InitRequest::new(Init::Sfm),
                     &scene,
                     &dir.join("gems_sfm"),
                     &cfg,
                 )
             })
             .transpose()?;
+        const SHARP_SFM: &str = "GeMS, built-in SfM on the sharp frames";
+        let gems_sharp_sfm = wants(RowKind::SharpSfm)
+            .then(
+                || match gems_pipeline::run_sfm(&sharp, &dir.join("sharp_sfm"), seed, focal) {
+                    Ok(model) => row(
+                        SHARP_SFM,
+                        gems_pipeline::InitRequest {
+                            colmap_model: Some(model),
+                            ..gems_pipeline::InitRequest::new(Init::Colmap)
+                        },
+                        &scene,
+                        &dir.join("gems_sharp_sfm"),
+                        &cfg,
+                    ),
+                    Err(e) => Ok(Row::failed(seed, SHARP_SFM, format!("SfM failed: {e:#}"))),
+                },
+            )
+            .transpose()?;
         let gems_gt = wants(RowKind::Gt)
             .then(|| {
                 row(
                     "GeMS, ground-truth poses",
-                    Init::Gt,
+                    gems_pipeline::InitRequest::new(Init::Gt),
                     &scene,
                     &dir.join("gems_gt"),
                     &cfg,
@@ -212,7 +239,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             })
             .transpose()?;
         // The blurry input is every blurry run's `input` figure: read it from whichever ran.
-        let input = ["gems_sfm", "gems_gt"]
+        let input = ["gems_sfm", "gems_sharp_sfm", "gems_gt"]
             .iter()
             .find_map(|run| read_metrics(&dir.join(run)).ok().and_then(|m| m.input));
         if let Some(input) = input {
@@ -222,6 +249,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             });
         }
         rows.extend(gems_sfm);
+        rows.extend(gems_sharp_sfm);
         rows.extend(gems_gt);
         if wants(RowKind::Ceiling) {
             let mut ceiling = TrainConfig {
@@ -231,7 +259,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ceiling.init.sfm_rerun_fraction = 0.0;
             rows.push(row(
                 "sharp ceiling (n = 1, sharp frames, SfM)",
-                Init::Sfm,
+                gems_pipeline::InitRequest::new(Init::Sfm),
                 &sharp,
                 &dir.join("ceiling"),
                 &ceiling,
