@@ -195,6 +195,30 @@ fn sfm_tracking_density_flags_reach_the_sfm() {
         "0.9",
     ]);
     fails_clearly(&bad, "grid_spacing");
+
+    // A focal under a prior is refined away from the given one; a held one is kept.
+    let focal = |extra: &[&str], name: &str| {
+        let out = dir.path().join(name);
+        ok(&gems(&[&["sfm", s(&scene), "-o", s(&out)], extra].concat()));
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("sfm_report.json")).unwrap()).unwrap();
+        report["focal"].as_f64().unwrap()
+    };
+    assert_eq!(focal(&["--focal", "80"], "held"), 80.0);
+    let refined = focal(&["--focal", "80", "--focal-prior", "0.05"], "prior");
+    assert!(
+        refined != 80.0 && (refined / 80.0 - 1.0).abs() < 0.5,
+        "{refined}"
+    );
+    let bad = gems(&[
+        "sfm",
+        s(&scene),
+        "-o",
+        s(&dir.path().join("bad-prior")),
+        "--focal-prior",
+        "0",
+    ]);
+    fails_clearly(&bad, "focal_prior");
 }
 
 #[test]

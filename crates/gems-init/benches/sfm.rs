@@ -4,7 +4,7 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use gems_init::sfm::ba::{BaOptions, Observation, Pinhole, bundle_adjust};
+use gems_init::sfm::ba::{BaOptions, Focal, Observation, Pinhole, bundle_adjust};
 use gems_init::sfm::{SfmOptions, run_sfm};
 use gems_math::{Intrinsics, Se3};
 use nalgebra::{Rotation3, Vector2, Vector3};
@@ -75,7 +75,7 @@ fn bundle_adjust_20_views_2000_points(bencher: divan::Bencher) {
             &BaOptions {
                 huber_px: 1.0,
                 max_iters: 10,
-                refine_focal: true,
+                focal: Focal::Free,
             },
         )
     });

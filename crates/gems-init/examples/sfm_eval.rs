@@ -3,9 +3,12 @@
 //!
 //! Usage: sfm_eval <work_dir> [--views N] [--seed S] [--estimate-focal] [--levels-dir DIR]
 //!        [--working-sizes 192,128] [--grid SPACING_FRAC] [--neighbours N]
-//!        [--max-reproj PX]
+//!        [--max-reproj PX] [--focal F] [--focal-prior REL]
 //! With `--levels-dir`, the scene is an existing folder with `images/` and `poses_bounds.npy`
-//! (e.g. a `blur_09` level of `gems synth --blur-levels`) instead of a generated one.
+//! (e.g. a `blur_09` level of `gems synth --blur-levels`, or a Deblur-NeRF real scene, whose
+//! poses file is its COLMAP model's) instead of a generated one. `--focal` gives the SfM that
+//! focal (e.g. the photos' EXIF one) instead of the reference's; `--focal-prior` refines it in
+//! the final bundle adjustment under a prior of that relative width.
 //! Prints registered views, points, translation RMSE over the path extent after Sim(3)
 //! alignment, the mean relative-rotation error over all registered pairs (degrees), the focal
 //! and its error; per-view centre errors go to stderr.
@@ -27,6 +30,8 @@ fn main() {
     let mut reproj: Option<f64> = None;
     let mut neighbours: Option<usize> = None;
     let mut level_dir: Option<PathBuf> = None;
+    let mut given_focal: Option<f64> = None;
+    let mut focal_prior: Option<f64> = None;
     let mut it = args[1..].iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -46,6 +51,8 @@ fn main() {
                 );
             }
             "--levels-dir" => level_dir = Some(PathBuf::from(it.next().unwrap())),
+            "--focal" => given_focal = Some(it.next().unwrap().parse().unwrap()),
+            "--focal-prior" => focal_prior = Some(it.next().unwrap().parse().unwrap()),
             s => panic!("unknown argument {s}"),
         }
     }
@@ -63,7 +70,8 @@ fn main() {
     let images = load_images(&dir).unwrap();
     let gt_focal = rows[0].focal();
     let mut opts = SfmOptions {
-        focal_px: (!estimate).then_some(gt_focal),
+        focal_px: (!estimate).then_some(given_focal.unwrap_or(gt_focal)),
+        focal_prior,
         seed: cfg.seed,
         ..SfmOptions::default()
     };

@@ -19,6 +19,11 @@ pub struct Args {
     /// carry it, else estimated.
     #[arg(long)]
     pub focal: Option<f64>,
+    /// Refine the given or EXIF focal in the final bundle adjustment under a Gaussian prior of
+    /// this relative width (e.g. 0.02) instead of holding it fixed. Off by default: under heavy
+    /// blur the photos pull the focal away from an exact one (crates/gems-init/BENCHMARKS.md).
+    #[arg(long)]
+    pub focal_prior: Option<f64>,
     /// Long side (px) of the pyramid levels to try (default: 192,128,96,64), nearest first to
     /// the level where the estimated motion blur is about 10 px.
     #[arg(long, value_delimiter = ',')]
@@ -86,6 +91,7 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     let images = sfm::load_images(&args.scene)?;
     let mut opts = SfmOptions {
         focal_px: focal,
+        focal_prior: args.focal_prior,
         seed: args.seed,
         ..SfmOptions::default()
     };

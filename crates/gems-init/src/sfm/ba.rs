@@ -41,12 +41,39 @@ impl Pinhole for Intrinsics {
     }
 }
 
+/// What [`bundle_adjust`] does with the shared focal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Focal {
+    /// Held at its value.
+    Fixed,
+    /// Refined with the poses and points.
+    Free,
+    /// Refined under a Gaussian prior: the cost gains ½((f − focal)/sigma)², both in pixels. A
+    /// focal from EXIF is known to a few percent (the focal length and sensor size a camera
+    /// writes are rounded, and a 35 mm equivalent is approximate); the photos may know it better.
+    Prior { focal: f64, sigma: f64 },
+}
+
+impl Focal {
+    fn refined(self) -> bool {
+        self != Focal::Fixed
+    }
+
+    /// The prior's cost at focal `f`.
+    fn cost(self, f: f64) -> f64 {
+        match self {
+            Focal::Prior { focal, sigma } => 0.5 * ((f - focal) / sigma).powi(2),
+            Focal::Fixed | Focal::Free => 0.0,
+        }
+    }
+}
+
 /// Settings for [`bundle_adjust`].
 #[derive(Clone, Copy, Debug)]
 pub struct BaOptions {
     pub huber_px: f64,
     pub max_iters: usize,
-    pub refine_focal: bool,
+    pub focal: Focal,
 }
 
 /// Outcome of [`bundle_adjust`]: robust cost before and after, iterations run.
@@ -144,9 +171,9 @@ pub fn bundle_adjust(
     k: &mut Intrinsics,
     opts: &BaOptions,
 ) -> BaSummary {
-    let layout = ParamLayout::new(poses.len(), fixed, obs, opts.refine_focal);
+    let layout = ParamLayout::new(poses.len(), fixed, obs, opts.focal.refined());
     let by_point = PointObservations::new(points.len(), obs);
-    let initial_cost = total_cost(poses, points, obs, k, opts.huber_px);
+    let initial_cost = total_cost(poses, points, obs, k, opts.huber_px) + opts.focal.cost(k.fx);
     let mut cost = initial_cost;
     let mut lambda = 1e-3;
     let mut iterations = 0;
@@ -161,6 +188,12 @@ pub fn bundle_adjust(
         let mut accepted = false;
         for _attempt in 0..8 {
             let mut system = schur_system(&lins, obs, &layout, &by_point, lambda);
+            if let (Some(fc), Focal::Prior { focal, sigma }) = (layout.focal_col, opts.focal) {
+                // Residual (f − focal)/σ with Jacobian 1/σ: Gauss–Newton adds JᵀJ and Jᵀr.
+                let w = 1.0 / (sigma * sigma);
+                system.s[(fc, fc)] += w;
+                system.b[fc] += w * (k.fx - focal);
+            }
             let n = layout.n;
             for i in 0..n {
                 system.s[(i, i)] += lambda * (system.s[(i, i)] + 1e-9);
@@ -196,6 +229,7 @@ pub fn bundle_adjust(
             }
             let new_cost = if new_k.fx > 0.0 {
                 total_cost(&new_poses, &new_points, obs, &new_k, opts.huber_px)
+                    + opts.focal.cost(new_k.fx)
             } else {
                 f64::INFINITY
             };
@@ -541,7 +575,7 @@ mod tests {
             &BaOptions {
                 huber_px: 2.0,
                 max_iters: 100,
-                refine_focal: true,
+                focal: Focal::Free,
             },
         );
         assert!(s.final_cost < 1e-10 * s.initial_cost.max(1.0), "{s:?}");
@@ -550,6 +584,62 @@ mod tests {
             assert!(relative_angle(p, g) < 1e-6);
             assert!((camera_center_from_w2c(p) - camera_center_from_w2c(g)).norm() < 1e-5);
         }
+    }
+
+    /// The focal under a prior lands between the prior's value and what the photos say, at
+    /// either end in the limits of a sharp and a flat prior.
+    #[test]
+    fn focal_prior_weighs_the_given_focal_against_the_photos() {
+        let (gt_poses, gt_pts, mut obs, k) = problem(6);
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        for o in &mut obs {
+            o.xy += Vector2::new(rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5));
+        }
+        let mut fixed = vec![false; gt_poses.len()];
+        fixed[0] = true;
+        fixed[5] = true;
+        let solve = |focal: Focal| {
+            let (mut poses, mut pts, mut kk) = (gt_poses.clone(), gt_pts.clone(), k);
+            kk.fx = 330.0;
+            kk.fy = 330.0;
+            let s = bundle_adjust(
+                &mut poses,
+                &fixed,
+                &mut pts,
+                &obs,
+                &mut kk,
+                &BaOptions {
+                    huber_px: 2.0,
+                    max_iters: 100,
+                    focal,
+                },
+            );
+            assert!(s.final_cost <= s.initial_cost, "{s:?}");
+            assert_eq!(kk.fx, kk.fy);
+            kk.fx
+        };
+        let free = solve(Focal::Free);
+        assert!((free - 300.0).abs() < 1.0, "the photos say {free}");
+        let prior = |sigma| Focal::Prior {
+            focal: 330.0,
+            sigma,
+        };
+        let sharp = solve(prior(1e-4));
+        assert!(
+            (sharp - 330.0).abs() < 0.01,
+            "a sharp prior holds it: {sharp}"
+        );
+        let flat = solve(prior(1e5));
+        assert!(
+            (flat - free).abs() < 0.01,
+            "a flat prior lets it go: {flat}"
+        );
+        let between = solve(prior(0.5));
+        assert!(
+            between > free + 0.01 && between < 330.0 - 0.01,
+            "{free} < {between} < 330"
+        );
+        assert_eq!(solve(Focal::Fixed), 330.0);
     }
 
     #[test]
@@ -573,7 +663,7 @@ mod tests {
             &BaOptions {
                 huber_px: 1.0,
                 max_iters: 50,
-                refine_focal: false,
+                focal: Focal::Fixed,
             },
         );
         for (p, g) in poses.iter().zip(&gt_poses) {

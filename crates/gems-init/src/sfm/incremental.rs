@@ -1,7 +1,7 @@
 //! Incremental reconstruction at the working level: tracks from verified pair matches, the
 //! initial pair, PnP registration, triangulation and bundle adjustment.
 
-use super::ba::{self, BaOptions, Observation, Pinhole};
+use super::ba::{self, BaOptions, Focal, Observation, Pinhole};
 use super::features::Features;
 use super::geometry;
 use super::{PairCorr, PairMatches, SfmOptions};
@@ -201,7 +201,7 @@ fn triangulate_track(
 }
 
 /// Bundle-adjust all points and registered poses (the `fixed` view is the gauge).
-fn run_ba(r: &mut Recon, fixed_view: usize, refine_focal: bool, iters: usize, opts: &SfmOptions) {
+fn run_ba(r: &mut Recon, fixed_view: usize, focal: Focal, iters: usize, opts: &SfmOptions) {
     let mut point_of_track = vec![usize::MAX; r.tracks.len()];
     let mut points = Vec::new();
     let mut obs = Vec::new();
@@ -237,7 +237,7 @@ fn run_ba(r: &mut Recon, fixed_view: usize, refine_focal: bool, iters: usize, op
         &BaOptions {
             huber_px: opts.max_reproj_px * 0.5,
             max_iters: iters,
-            refine_focal,
+            focal,
         },
     );
     for (v, p) in r.poses.iter_mut().enumerate() {
@@ -364,7 +364,7 @@ pub(crate) fn reconstruct(
     r.poses[i0] = Some(Se3::identity());
     r.poses[j0] = Some(rel);
     triangulate_all(&mut r, opts);
-    run_ba(&mut r, i0, false, 30, opts);
+    run_ba(&mut r, i0, Focal::Fixed, 30, opts);
     filter_outliers(&mut r, opts);
     if r.tracks.iter().filter(|t| t.xyz.is_some()).count() < opts.min_pair_inliers / 2 {
         return None;
@@ -429,7 +429,7 @@ pub(crate) fn reconstruct(
         let Some(v) = registered else { break };
         let added = triangulate_all(&mut r, opts);
         let nreg = r.registered();
-        run_ba(&mut r, i0, false, 15, opts);
+        run_ba(&mut r, i0, Focal::Fixed, 15, opts);
         filter_outliers(&mut r, opts);
         tracing::debug!(
             view = v,
@@ -439,10 +439,10 @@ pub(crate) fn reconstruct(
         );
     }
     triangulate_all(&mut r, opts);
-    run_ba(&mut r, i0, false, 50, opts);
+    run_ba(&mut r, i0, Focal::Fixed, 50, opts);
     filter_outliers(&mut r, opts);
     triangulate_all(&mut r, opts);
-    run_ba(&mut r, i0, false, 30, opts);
+    run_ba(&mut r, i0, Focal::Fixed, 30, opts);
     filter_outliers(&mut r, opts);
     Some(r)
 }
@@ -456,11 +456,18 @@ pub(crate) fn refine_focal_bounded(
     hi: f64,
     opts: &SfmOptions,
 ) -> Option<Recon> {
+    let out = refine_focal(r, Focal::Free, opts)?;
+    (out.k.fx >= lo && out.k.fx <= hi).then_some(out)
+}
+
+/// A final bundle adjustment of `r` that refines the focal as `focal` says, then drops the
+/// outliers; `None` when it loses a view.
+pub(crate) fn refine_focal(r: &Recon, focal: Focal, opts: &SfmOptions) -> Option<Recon> {
     let fixed = r.poses.iter().position(|p| p.is_some())?;
     let mut out = r.clone();
-    run_ba(&mut out, fixed, true, 50, opts);
+    run_ba(&mut out, fixed, focal, 50, opts);
     filter_outliers(&mut out, opts);
-    (out.k.fx >= lo && out.k.fx <= hi && out.registered() == r.registered()).then_some(out)
+    (out.registered() == r.registered()).then_some(out)
 }
 
 #[cfg(test)]

@@ -61,8 +61,13 @@ pub struct SfmImage {
 /// Settings of [`run_sfm`].
 #[derive(Clone, Debug)]
 pub struct SfmOptions {
-    /// Focal length in full-resolution pixels when known (metadata); it is then held fixed.
+    /// Focal length in full-resolution pixels when known (a calibration, or metadata); it is
+    /// then held fixed, unless `focal_prior` says how well it is known.
     pub focal_px: Option<f64>,
+    /// With `focal_px`: its relative uncertainty (σ as a fraction of the focal). The
+    /// reconstruction is made with the focal held fixed, then a final bundle adjustment refines
+    /// it under a Gaussian prior of that width. `None` keeps it fixed (a calibrated camera).
+    pub focal_prior: Option<f64>,
     /// Candidate focal lengths as multiples of the long image side, used when `focal_px` is None.
     pub focal_candidates: Vec<f64>,
     /// Long side, in pixels, of the pyramid levels tried in order; the first that registers every
@@ -92,6 +97,7 @@ impl Default for SfmOptions {
     fn default() -> Self {
         SfmOptions {
             focal_px: None,
+            focal_prior: None,
             focal_candidates: vec![0.6, 0.75, 0.9, 1.1, 1.35, 1.7],
             working_sizes: vec![192, 128, 96, 64],
             max_features: 500,
@@ -426,11 +432,28 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
             unregistered: images.iter().map(|i| i.name.clone()).collect(),
         });
     };
-    if opts.focal_px.is_none()
-        && let Some(r) = refine_focal_around(&rec, long * scale, opts)
-    {
-        tracing::info!(focal = r.k.fx / scale, "focal refined");
-        rec = r;
+    match (opts.focal_px, opts.focal_prior) {
+        (None, _) => {
+            if let Some(r) = refine_focal_around(&rec, long * scale, opts) {
+                tracing::info!(focal = r.k.fx / scale, "focal refined");
+                rec = r;
+            }
+        }
+        (Some(f), Some(rel)) => {
+            let prior = ba::Focal::Prior {
+                focal: f * scale,
+                sigma: rel * f * scale,
+            };
+            if let Some(r) = incremental::refine_focal(&rec, prior, opts) {
+                tracing::info!(
+                    given = f,
+                    focal = r.k.fx / scale,
+                    "focal refined under its prior"
+                );
+                rec = r;
+            }
+        }
+        (Some(_), None) => {}
     }
     let mut result = output::assemble(images, &rec, scale, opts.focal_px.is_some(), ws);
     result.stats.seconds = t0.elapsed().as_secs_f64();
@@ -601,6 +624,14 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
     {
         return Err(SfmError::InvalidOption(
             "focal candidates must be positive and non-empty".into(),
+        ));
+    }
+    if opts
+        .focal_prior
+        .is_some_and(|s| !(s > 0.0 && s.is_finite()))
+    {
+        return Err(SfmError::InvalidOption(
+            "focal_prior must be a positive fraction of the focal".into(),
         ));
     }
     if opts.focal_px.is_some_and(|f| !(f > 0.0 && f.is_finite())) {
