@@ -140,6 +140,7 @@ pub(crate) struct Kernel {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     label: &'static str,
+    profiler: Option<crate::profiler::SharedProfiler>,
 }
 
 impl Kernel {
@@ -159,6 +160,7 @@ impl Kernel {
             pipeline,
             layout,
             label: entry,
+            profiler: ctx.profiler.clone(),
         }
     }
 
@@ -195,10 +197,7 @@ impl Kernel {
             return;
         }
         let (x, y) = grid(threads);
-        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(self.label),
-            timestamp_writes: None,
-        });
+        let mut pass = crate::profiler::begin_pass(self.profiler.as_ref(), enc, self.label);
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, group, &[]);
         pass.dispatch_workgroups(x, y, 1);

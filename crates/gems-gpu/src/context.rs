@@ -64,6 +64,11 @@ pub struct GpuContext {
     /// (`rasterize_backward_subgroup.wgsl`); otherwise in workgroup memory, three barriers per
     /// entry (`rasterize_backward.wgsl`).
     pub subgroups: bool,
+    /// The device can time compute passes (`Features::TIMESTAMP_QUERY`, enabled when the
+    /// adapter has it); see [`GpuContext::with_profiler`].
+    pub timestamps: bool,
+    /// Times every compute pass of the kernels built from this context, when on.
+    pub(crate) profiler: Option<crate::profiler::SharedProfiler>,
 }
 
 impl std::fmt::Debug for GpuContext {
@@ -71,6 +76,8 @@ impl std::fmt::Debug for GpuContext {
         f.debug_struct("GpuContext")
             .field("adapter", &self.adapter)
             .field("subgroups", &self.subgroups)
+            .field("timestamps", &self.timestamps)
+            .field("profiling", &self.profiler.is_some())
             .finish_non_exhaustive()
     }
 }
@@ -115,6 +122,11 @@ impl GpuContext {
         if subgroups {
             features |= wgpu::Features::SUBGROUP;
         }
+        // Timestamp queries cost nothing until a profiler writes them (`with_profiler`).
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        if timestamps {
+            features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("gems"),
@@ -132,7 +144,34 @@ impl GpuContext {
             adapter: summary,
             limits,
             subgroups,
+            timestamps,
+            profiler: None,
         })
+    }
+
+    /// The same device with a profiler: every compute pass of the kernels built from the
+    /// returned context (renderer, loss, Adam, MCMC, regularisers, the resident step) is timed
+    /// on the GPU; [`GpuContext::kernel_times`] reads the times. An error where the adapter
+    /// cannot time passes.
+    pub fn with_profiler(&self) -> Result<GpuContext, GpuError> {
+        if !self.timestamps {
+            return Err(GpuError::Operation(format!(
+                "{} cannot time compute passes (no TIMESTAMP_QUERY)",
+                self.adapter
+            )));
+        }
+        Ok(GpuContext {
+            profiler: Some(crate::profiler::Profiler::new(&self.device)),
+            ..self.clone()
+        })
+    }
+
+    /// The GPU time of each kernel since the previous call (waits for the GPU); `None` for a
+    /// context without a profiler.
+    pub fn kernel_times(&self) -> Option<Result<crate::KernelTimes, GpuError>> {
+        self.profiler
+            .as_ref()
+            .map(|p| crate::profiler::collect(self, p))
     }
 
     /// The same device with [`GpuContext::subgroups`] off: kernels compiled for it take the

@@ -46,29 +46,35 @@ pub(crate) struct Params {
     pub pad1: u32,
 }
 
+/// A compiled kernel and the name its passes are labelled (and profiled) by.
+pub(crate) struct Pipeline {
+    pub pipeline: wgpu::ComputePipeline,
+    pub label: &'static str,
+}
+
 pub(crate) struct Kernels {
-    pub project_forward: wgpu::ComputePipeline,
-    pub scan_blocks: wgpu::ComputePipeline,
-    pub add_offsets: wgpu::ComputePipeline,
-    pub map_intersections: wgpu::ComputePipeline,
-    pub sort_histogram: wgpu::ComputePipeline,
-    pub sort_scatter: wgpu::ComputePipeline,
-    pub tile_ranges: wgpu::ComputePipeline,
-    pub rasterize_forward: wgpu::ComputePipeline,
-    pub rasterize_backward: wgpu::ComputePipeline,
-    pub sum_intersections: wgpu::ComputePipeline,
-    pub project_backward: wgpu::ComputePipeline,
-    pub reduce_segments: wgpu::ComputePipeline,
-    pub background_backward: wgpu::ComputePipeline,
-    pub pack_gaussians: wgpu::ComputePipeline,
-    pub unpack_grads: wgpu::ComputePipeline,
+    pub project_forward: Pipeline,
+    pub scan_blocks: Pipeline,
+    pub add_offsets: Pipeline,
+    pub map_intersections: Pipeline,
+    pub sort_histogram: Pipeline,
+    pub sort_scatter: Pipeline,
+    pub tile_ranges: Pipeline,
+    pub rasterize_forward: Pipeline,
+    pub rasterize_backward: Pipeline,
+    pub sum_intersections: Pipeline,
+    pub project_backward: Pipeline,
+    pub reduce_segments: Pipeline,
+    pub background_backward: Pipeline,
+    pub pack_gaussians: Pipeline,
+    pub unpack_grads: Pipeline,
 }
 
 impl Kernels {
     /// Compiles every kernel; `subgroups` picks the backward rasterizer that reduces with
     /// subgroup adds (the device must have `Features::SUBGROUP`, see `GpuContext::subgroups`).
     pub fn new(device: &wgpu::Device, subgroups: bool) -> Self {
-        let make = |name: &str, projection: bool, body: &str, entry: &str| {
+        let make = |name: &'static str, projection: bool, body: &str, entry: &str| {
             let mut src = String::from(COMMON);
             if projection {
                 src.push_str(PROJECTION);
@@ -78,14 +84,18 @@ impl Kernels {
                 label: Some(name),
                 source: wgpu::ShaderSource::Wgsl(src.into()),
             });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(name),
                 layout: None,
                 module: &module,
                 entry_point: Some(entry),
                 compilation_options: Default::default(),
                 cache: None,
-            })
+            });
+            Pipeline {
+                pipeline,
+                label: name,
+            }
         };
         let scan = include_str!("../shaders/prefix_sum.wgsl");
         let resident = include_str!("../shaders/resident.wgsl");
@@ -182,13 +192,14 @@ impl Kernels {
 /// Encodes one dispatch of `groups` workgroups of `pipeline`, with `params` at binding 0 and
 /// `buffers` at bindings 1, 2, …
 pub(crate) fn dispatch(
-    device: &wgpu::Device,
+    ctx: &crate::GpuContext,
     encoder: &mut wgpu::CommandEncoder,
-    pipeline: &wgpu::ComputePipeline,
+    pipeline: &Pipeline,
     params: &Params,
     buffers: &[&wgpu::Buffer],
     groups: u32,
 ) {
+    let device = &ctx.device;
     if groups == 0 {
         return;
     }
@@ -209,11 +220,11 @@ pub(crate) fn dispatch(
     }
     let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: None,
-        layout: &pipeline.get_bind_group_layout(0),
+        layout: &pipeline.pipeline.get_bind_group_layout(0),
         entries: &entries,
     });
-    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-    pass.set_pipeline(pipeline);
+    let mut pass = crate::profiler::begin_pass(ctx.profiler.as_ref(), encoder, pipeline.label);
+    pass.set_pipeline(&pipeline.pipeline);
     pass.set_bind_group(0, &bind_group, &[]);
     let x = groups.min(MAX_DIM);
     pass.dispatch_workgroups(x, groups.div_ceil(x), 1);

@@ -11,6 +11,8 @@
 //!   with the contract of `gems_splat::Renderer`; one WGSL compute shader per stage and
 //!   direction under `shaders/`.
 //! * [`ImageBatch`] — images resident on the GPU, for steps that keep `dL/dRGB` there.
+//! * [`GpuContext::with_profiler`] / [`GpuContext::kernel_times`] — GPU timestamps around every
+//!   kernel's pass, summed per kernel ([`KernelTimes`]).
 //!
 //! Reproducibility: no kernel adds floats atomically; every sum (per tile entry over the
 //! tile's pixels, per Gaussian over its tile entries and cameras, per camera over Gaussians and
@@ -58,6 +60,7 @@ mod kernels;
 mod loss;
 mod mcmc;
 pub mod params;
+mod profiler;
 mod regularize;
 mod renderer;
 pub mod rng;
@@ -69,6 +72,7 @@ pub use engine::{Engine, FrozenScene};
 pub use loss::{BlurLoss, LossScalars};
 pub use mcmc::{GpuMcmc, N_MAX, NoiseParams};
 pub use params::{GpuGaussians, GpuGradients, Group, GroupMoments};
+pub use profiler::{KernelTime, KernelTimes};
 pub use regularize::GpuRegularizers;
 pub use renderer::{CameraChunk, GpuRenderer};
 pub use step::{ResidentStep, StepResult, StepSettings};

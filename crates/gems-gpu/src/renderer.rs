@@ -437,7 +437,7 @@ impl GpuRenderer {
                 let groups: Vec<&wgpu::Buffer> =
                     Group::ALL.iter().map(|&gr| &g.group(gr).param).collect();
                 dispatch(
-                    dev,
+                    &self.ctx,
                     &mut enc,
                     &self.kernels.pack_gaussians,
                     &pp,
@@ -464,7 +464,7 @@ impl GpuRenderer {
         b.radii.ensure(dev, lim, pairs as u64 * 8)?;
         b.offsets.ensure(dev, lim, (pairs as u64 + 1) * 4)?;
         dispatch(
-            dev,
+            &self.ctx,
             &mut enc,
             &self.kernels.project_forward,
             &p,
@@ -478,8 +478,7 @@ impl GpuRenderer {
             groups_for(pairs + 1),
         );
         encode_scan(
-            dev,
-            lim,
+            &self.ctx,
             &self.kernels,
             &mut enc,
             &mut b.scan_levels,
@@ -519,7 +518,7 @@ impl GpuRenderer {
             b.owner.ensure(dev, lim, total * 4)?;
             p.n = pairs as u32;
             dispatch(
-                dev,
+                &self.ctx,
                 &mut enc,
                 &self.kernels.map_intersections,
                 &p,
@@ -534,8 +533,7 @@ impl GpuRenderer {
                 groups_for(pairs),
             );
             let cur = encode_sort(
-                dev,
-                lim,
+                &self.ctx,
                 &self.kernels,
                 &mut enc,
                 b,
@@ -544,7 +542,7 @@ impl GpuRenderer {
             )?;
             p.n = total as u32;
             dispatch(
-                dev,
+                &self.ctx,
                 &mut enc,
                 &self.kernels.tile_ranges,
                 &p,
@@ -562,7 +560,7 @@ impl GpuRenderer {
         b.rgb.ensure(dev, lim, pixels * 12)?;
         b.aux.ensure(dev, lim, pixels * 16)?;
         dispatch(
-            dev,
+            &self.ctx,
             &mut enc,
             &self.kernels.rasterize_forward,
             &p,
@@ -727,7 +725,7 @@ impl GpuRenderer {
             };
             let b = &self.bufs;
             dispatch(
-                &self.ctx.device,
+                &self.ctx,
                 &mut enc,
                 &self.kernels.unpack_grads,
                 &p,
@@ -819,7 +817,7 @@ impl GpuRenderer {
         let mut enc = dev.create_command_encoder(&Default::default());
         enc.clear_buffer(b.entry_grads.get(), 0, None);
         dispatch(
-            dev,
+            &self.ctx,
             &mut enc,
             &self.kernels.rasterize_backward,
             &p,
@@ -837,7 +835,7 @@ impl GpuRenderer {
         );
         p.n = (nc * n) as u32;
         dispatch(
-            dev,
+            &self.ctx,
             &mut enc,
             &self.kernels.sum_intersections,
             &p,
@@ -850,7 +848,7 @@ impl GpuRenderer {
             groups_for(nc * n),
         );
         dispatch(
-            dev,
+            &self.ctx,
             &mut enc,
             &self.kernels.project_backward,
             &p,
@@ -870,7 +868,7 @@ impl GpuRenderer {
         p.seg_len = n as u32;
         p.seg_width = 12;
         dispatch(
-            dev,
+            &self.ctx,
             &mut enc,
             &self.kernels.reduce_segments,
             &p,
@@ -878,7 +876,7 @@ impl GpuRenderer {
             nc as u32,
         );
         dispatch(
-            dev,
+            &self.ctx,
             &mut enc,
             &self.kernels.background_backward,
             &p,
@@ -935,22 +933,20 @@ fn check_cameras(cams: &[Camera], backgrounds: &[[f32; 3]]) -> Result<(u32, u32)
 /// Encodes an in-place exclusive prefix sum of the first `n` u32 of `data`: blocks of 256,
 /// then the block totals scanned the same way (recursively) and added back.
 fn encode_scan(
-    dev: &wgpu::Device,
-    lim: &wgpu::Limits,
+    ctx: &GpuContext,
     k: &Kernels,
     enc: &mut wgpu::CommandEncoder,
     levels: &mut Vec<Resident>,
     data: &wgpu::Buffer,
     n: usize,
 ) -> Result<(), GpuError> {
-    let gpu = ScanGpu { dev, lim, k };
+    let gpu = ScanGpu { ctx, k };
     encode_scan_level(&gpu, enc, levels, 0, data, n)
 }
 
-/// The device, its limits and the kernels, as one argument of the recursive scan.
+/// The device and the kernels, as one argument of the recursive scan.
 struct ScanGpu<'a> {
-    dev: &'a wgpu::Device,
-    lim: &'a wgpu::Limits,
+    ctx: &'a GpuContext,
     k: &'a Kernels,
 }
 
@@ -962,7 +958,8 @@ fn encode_scan_level(
     data: &wgpu::Buffer,
     n: usize,
 ) -> Result<(), GpuError> {
-    let ScanGpu { dev, lim, k } = *gpu;
+    let ScanGpu { ctx, k } = *gpu;
+    let (dev, lim) = (&ctx.device, &ctx.limits);
     let blocks = n.div_ceil(WG as usize);
     while levels.len() <= level {
         levels.push(Resident::new("prefix-sum block totals"));
@@ -973,10 +970,10 @@ fn encode_scan_level(
         num_blocks: blocks as u32,
         ..Params::default()
     };
-    dispatch(dev, enc, &k.scan_blocks, &p, &[data, &sums], blocks as u32);
+    dispatch(ctx, enc, &k.scan_blocks, &p, &[data, &sums], blocks as u32);
     if blocks > 1 {
         encode_scan_level(gpu, enc, levels, level + 1, &sums, blocks)?;
-        dispatch(dev, enc, &k.add_offsets, &p, &[data, &sums], blocks as u32);
+        dispatch(ctx, enc, &k.add_offsets, &p, &[data, &sums], blocks as u32);
     }
     Ok(())
 }
@@ -985,14 +982,14 @@ fn encode_scan_level(
 /// buffers: 4 passes over the depth bits, then enough passes over the (camera, tile) index for
 /// `tile_keys` values. Returns the slot that holds the result.
 fn encode_sort(
-    dev: &wgpu::Device,
-    lim: &wgpu::Limits,
+    ctx: &GpuContext,
     k: &Kernels,
     enc: &mut wgpu::CommandEncoder,
     b: &mut Buffers,
     total: usize,
     tile_keys: u32,
 ) -> Result<usize, GpuError> {
+    let (dev, lim) = (&ctx.device, &ctx.limits);
     let blocks = total.div_ceil(WG as usize);
     let hist = b
         .histogram
@@ -1016,17 +1013,17 @@ fn encode_sort(
             b.key_lo[cur].get()
         };
         dispatch(
-            dev,
+            ctx,
             enc,
             &k.sort_histogram,
             &p,
             &[src_keys, &hist],
             blocks as u32,
         );
-        encode_scan(dev, lim, k, enc, &mut b.scan_levels, &hist, blocks * 256)?;
+        encode_scan(ctx, k, enc, &mut b.scan_levels, &hist, blocks * 256)?;
         let nxt = 1 - cur;
         dispatch(
-            dev,
+            ctx,
             enc,
             &k.sort_scatter,
             &p,

@@ -171,3 +171,54 @@ fn a_batch_over_the_binding_limit_is_split_into_camera_chunks() {
     assert_eq!(out.cam_rotation.len(), 15);
     assert!(out.cam_translation.iter().flatten().all(|v| v.is_finite()));
 }
+
+/// A step on a profiled context times every kernel it runs (renderer, loss, backward, Adam)
+/// and gives the same bits as on the plain context.
+#[test]
+fn profiled_step_times_every_kernel_and_changes_no_bit() {
+    let ctx = ctx();
+    assert!(
+        ctx.timestamps,
+        "{} cannot time compute passes: the profiler's test needs TIMESTAMP_QUERY",
+        ctx.adapter
+    );
+    assert!(ctx.kernel_times().is_none(), "no profiler unless asked");
+    let profiled = ctx.with_profiler().unwrap();
+    let (g, cams, target) = scene(400, 5, 37, 29);
+    let s = settings();
+    let bg = [0.2, 0.3, 0.4];
+    let run = |c: &gems_gpu::GpuContext| {
+        let mut r = GpuRenderer::new(c);
+        let mut step = ResidentStep::new(c, &g, None).unwrap();
+        let out = step.step(&mut r, 0, &target, &cams, bg, &s).unwrap();
+        (out, step.download().unwrap().0)
+    };
+    let (plain, g_plain) = run(ctx);
+    let (timed, g_timed) = run(&profiled);
+    assert_eq!(plain.loss.to_bits(), timed.loss.to_bits());
+    assert_eq!(plain.cam_rotation, timed.cam_rotation);
+    assert_eq!(bits(&g_plain), bits(&g_timed));
+
+    let times = profiled.kernel_times().unwrap().unwrap();
+    eprintln!("{}", times.table());
+    for kernel in [
+        "project_forward",
+        "rasterize_forward",
+        "blur_mean",
+        "rasterize_backward",
+        "project_backward",
+        "adam",
+    ] {
+        let k = times
+            .kernels
+            .iter()
+            .find(|k| k.kernel.starts_with(kernel))
+            .unwrap_or_else(|| panic!("{kernel} not timed:\n{}", times.table()));
+        assert!(k.dispatches >= 1 && k.seconds >= 0.0, "{k:?}");
+    }
+    assert!(times.total_seconds() > 0.0, "{}", times.table());
+    assert_eq!(times.untimed_passes, 0);
+    // What was read is cleared: nothing ran since.
+    let again = profiled.kernel_times().unwrap().unwrap();
+    assert!(again.kernels.is_empty(), "{again:?}");
+}

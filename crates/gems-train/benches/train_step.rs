@@ -6,7 +6,8 @@
 //! `step_…` runs the CPU engine; `gpu_step_…` the same trainer on the GPU engine (any adapter,
 //! lavapipe included: `WGPU_BACKEND=vulkan`), whose step is resident (gems-gpu
 //! `ResidentStep`); its first step, which uploads the Gaussians and the image, is outside the
-//! timed window. `…_workgroup_reduction` forces the backward rasterizer without subgroups.
+//! timed window. `…_workgroup_reduction` forces the backward rasterizer without subgroups;
+//! `…_kernels` times one step's kernels with GPU timestamps and prints them.
 
 use gems_gpu::DeviceChoice;
 use gems_gpu::{Engine, GpuRenderer};
@@ -128,6 +129,38 @@ fn gpu_step_400x270_100k_n15_workgroup_reduction(bencher: divan::Bencher) {
         .expect("a context");
     let engine = Engine::Gpu(Box::new(GpuRenderer::new(&ctx.without_subgroups())));
     gpu_step(bencher, engine);
+}
+
+/// One GPU step with a GPU timestamp around every kernel (gems-gpu
+/// `GpuContext::with_profiler`): prints where the step's GPU time goes, slowest kernel first,
+/// and the step's wall time beside the kernels' sum (the difference is the host's work and the
+/// GPU waiting for it: uploads, readbacks, the CPU's share of the step).
+#[divan::bench(sample_count = 1, sample_size = 1)]
+fn gpu_step_400x270_100k_n15_kernels(bencher: divan::Bencher) {
+    let ctx = gems_gpu::select(DeviceChoice::Gpu)
+        .expect("a GPU adapter")
+        .expect("a context")
+        .with_profiler()
+        .expect("an adapter that can time compute passes");
+    let mut t = trainer();
+    t.set_engine(Engine::Gpu(Box::new(GpuRenderer::new(&ctx))));
+    t.step().unwrap();
+    // The first step's uploads and pipeline warm-up are not the step's.
+    let _ = ctx.kernel_times();
+    let mut wall = std::time::Duration::ZERO;
+    bencher.bench_local(|| {
+        let start = std::time::Instant::now();
+        t.step().unwrap();
+        wall = start.elapsed();
+    });
+    let times = ctx.kernel_times().unwrap().unwrap();
+    println!("{}\n{}", ctx.adapter, times.table());
+    println!(
+        "step wall {:.2} ms; kernels {:.2} ms; the rest (host, transfers, idle GPU) {:.2} ms",
+        wall.as_secs_f64() * 1e3,
+        times.total_seconds() * 1e3,
+        (wall.as_secs_f64() - times.total_seconds()) * 1e3
+    );
 }
 
 fn gpu_step(bencher: divan::Bencher, engine: Engine) {
