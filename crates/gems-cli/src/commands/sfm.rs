@@ -24,7 +24,7 @@ pub struct Args {
     /// blur the photos pull the focal away from an exact one (crates/gems-init/BENCHMARKS.md).
     #[arg(long)]
     pub focal_prior: Option<f64>,
-    /// Long side (px) of the pyramid levels to try (default: 192,128,96,64), nearest first to
+    /// Long side (px) of the pyramid levels to try (default: 384,256,192,128,96,64), nearest first to
     /// the level where the estimated motion blur is about 10 px.
     #[arg(long, value_delimiter = ',')]
     pub working_size: Option<Vec<u32>>,

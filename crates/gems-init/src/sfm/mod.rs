@@ -70,8 +70,10 @@ pub struct SfmOptions {
     pub focal_prior: Option<f64>,
     /// Candidate focal lengths as multiples of the long image side, used when `focal_px` is None.
     pub focal_candidates: Vec<f64>,
-    /// Long side, in pixels, of the pyramid levels tried in order; the first that registers every
-    /// view is kept, otherwise the best over all.
+    /// Long side, in pixels, of the pyramid levels, tried nearest-first to the level where the
+    /// estimated blur is about 10 px; the first that registers every view is kept, otherwise
+    /// the best over all. A size above the images' own long side means the images themselves
+    /// (they are never upsampled).
     pub working_sizes: Vec<u32>,
     /// Keypoints per image at the working level.
     pub max_features: usize,
@@ -99,7 +101,12 @@ impl Default for SfmOptions {
             focal_px: None,
             focal_prior: None,
             focal_candidates: vec![0.6, 0.75, 0.9, 1.1, 1.35, 1.7],
-            working_sizes: vec![192, 128, 96, 64],
+            // 256 and 384 for photos that are large and not very blurred: Deblur-NeRF's
+            // blurball (2400 px, 100 px of blur) registers at 256 with 1.05 % of centre error
+            // against the dataset's COLMAP model instead of 1.44 % at 192, and a nearly sharp
+            // 240 px scene at its own size with 0.07 % instead of 0.16 %
+            // (crates/gems-init/BENCHMARKS.md).
+            working_sizes: vec![384, 256, 192, 128, 96, 64],
             max_features: 500,
             min_pair_inliers: 20,
             max_reproj_px: 2.0,
@@ -495,12 +502,25 @@ fn working_sizes_by_blur(
     } else {
         f64::INFINITY
     };
-    let mut sizes = opts.working_sizes.clone();
+    let mut sizes = levels(&opts.working_sizes, long);
     sizes.sort_by(|&a, &b| {
         let d = |s: u32| (s as f64 / target_ws).ln().abs();
         d(a).total_cmp(&d(b)).then(b.cmp(&a))
     });
     (blurs, blur, sizes)
+}
+
+/// `sizes` with every size above the images' long side `long` replaced by `long` itself (the
+/// images are never upsampled), each once, in their order.
+fn levels(sizes: &[u32], long: f64) -> Vec<u32> {
+    let mut out: Vec<u32> = Vec::new();
+    for &s in sizes {
+        let s = s.min(long.round() as u32);
+        if !out.contains(&s) {
+            out.push(s);
+        }
+    }
+    out
 }
 
 /// Fewer keypoints than this at every working size make a view textureless.
@@ -522,7 +542,7 @@ fn textureless_views(
         .enumerate()
         .filter(|(k, f)| {
             f.xy.len() < TEXTURELESS_KEYPOINTS
-                && opts.working_sizes.iter().all(|&s| {
+                && levels(&opts.working_sizes, long).iter().all(|&s| {
                     let sc = features::exact_scale(w, s as f64 / long) as f32;
                     extract_one(&grays[*k], sc, opts).xy.len() < TEXTURELESS_KEYPOINTS
                 })
