@@ -121,8 +121,11 @@ pub struct PoseConfig {
     /// initial cameras (a dataset's COLMAP model) are not carried off by a shared drift of the
     /// paths. 0 = off (the GeMS paper), the default. On Deblur-NeRF's blurball trained from its
     /// COLMAP model (×8, 3000 steps) 100 raised the held-out views at the dataset's poses from
-    /// 22.53 to 28.45 dB and refined from 28.08 to 28.72 dB (BENCHMARKS.md, "Real data"); not
-    /// yet measured from the built-in SfM, whose cameras should move.
+    /// 22.53 to 28.45 dB and refined from 28.08 to 28.72 dB (BENCHMARKS.md, "Real data"); on a
+    /// generated scene from the SfM on its sharp frames +3.5 dB at the initial pose and half the
+    /// camera drift, but from the SfM on its blurry photos −3.6 dB at the midpoint
+    /// (BENCHMARKS.md, "Keeping accurate cameras"): for accurate starts only
+    /// (`configs/accurate-cameras.toml`).
     pub anchor_weight: f64,
 }
 
