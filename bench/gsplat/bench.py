@@ -175,8 +175,8 @@ def bench_size(rasterize, s, packed, warmup, iters):
             {"params": [sh_dc], "lr": float(m["lr_sh_dc"])},
             {"params": [sh_rest], "lr": float(m["lr_sh_rest"])},
         ],
-        eps=1e-15,
-        betas=(0.9, 0.999),
+        eps=float(m["adam_eps"]),
+        betas=(float(m["adam_beta1"]), float(m["adam_beta2"])),
     )
     window = gaussian_window(device=s.means.device)
 

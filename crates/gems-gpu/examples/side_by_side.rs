@@ -25,10 +25,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use gems_gpu::{
-    AdamConfig, DeviceChoice, GaussianLrs, GpuContext, GpuRenderer, ResidentStep, StepSettings,
-    buffers,
-};
+use gems_gpu::{DeviceChoice, GpuContext, GpuRenderer, ResidentStep, StepSettings, buffers};
 use gems_splat::{Camera, Gaussians, RenderSettings};
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
@@ -36,19 +33,12 @@ const SIZES: [usize; 3] = [10_000, 100_000, 300_000];
 const CAMERAS: usize = 15;
 const WIDTH: u32 = 400;
 const HEIGHT: u32 = 270;
-/// The training defaults both sides use (gems-train `TrainConfig`: `ssim_lambda`, the MCMC
-/// regularisers, the learning rates at the start of the schedule for a scene of extent 1).
-const SSIM_LAMBDA: f32 = 0.3;
-const OPACITY_REG: f32 = 0.01;
-const SCALE_REG: f32 = 0.01;
-const LRS: GaussianLrs = GaussianLrs {
-    means: 1.6e-4,
-    quats: 1e-3,
-    log_scales: 5e-3,
-    opacity_logits: 5e-2,
-    sh_dc: 2.5e-3,
-    sh_rest: 2.5e-3 / 20.0,
-};
+/// What both sides train with: gems's defaults at the first step for a scene of extent 1
+/// (loss weights, MCMC regularisers, learning rates, Adam), written into the inputs' metadata
+/// for bench.py.
+fn settings() -> StepSettings {
+    gems_train::TrainConfig::default().step_settings(0, 1.0)
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -171,19 +161,23 @@ fn write(dir: &Path, sizes: &[usize]) -> Result<(), String> {
                     .map_err(|e| e.to_string())
             })
             .collect::<Result<_, _>>()?;
+        let st = settings();
         let meta: HashMap<String, String> = [
             ("width", WIDTH.to_string()),
             ("height", HEIGHT.to_string()),
             ("sh_degree", "3".to_owned()),
-            ("ssim_lambda", SSIM_LAMBDA.to_string()),
-            ("opacity_reg", OPACITY_REG.to_string()),
-            ("scale_reg", SCALE_REG.to_string()),
-            ("lr_means", LRS.means.to_string()),
-            ("lr_quats", LRS.quats.to_string()),
-            ("lr_log_scales", LRS.log_scales.to_string()),
-            ("lr_opacity_logits", LRS.opacity_logits.to_string()),
-            ("lr_sh_dc", LRS.sh_dc.to_string()),
-            ("lr_sh_rest", LRS.sh_rest.to_string()),
+            ("ssim_lambda", st.ssim_lambda.to_string()),
+            ("opacity_reg", st.opacity_reg.to_string()),
+            ("scale_reg", st.scale_reg.to_string()),
+            ("lr_means", st.lrs.means.to_string()),
+            ("lr_quats", st.lrs.quats.to_string()),
+            ("lr_log_scales", st.lrs.log_scales.to_string()),
+            ("lr_opacity_logits", st.lrs.opacity_logits.to_string()),
+            ("lr_sh_dc", st.lrs.sh_dc.to_string()),
+            ("lr_sh_rest", st.lrs.sh_rest.to_string()),
+            ("adam_beta1", st.adam.beta1.to_string()),
+            ("adam_beta2", st.adam.beta2.to_string()),
+            ("adam_eps", st.adam.eps.to_string()),
         ]
         .into_iter()
         .map(|(k, v)| (k.to_owned(), v))
@@ -306,19 +300,7 @@ fn run(dir: &Path, sizes: &[usize], out: &Path, iters: usize, warmup: usize) -> 
         .map_err(|e| e.to_string())?
         .ok_or("no GPU adapter")?;
     println!("{}", ctx.adapter);
-    let settings = StepSettings {
-        ssim_lambda: SSIM_LAMBDA,
-        opacity_reg: OPACITY_REG,
-        scale_reg: SCALE_REG,
-        lrs: LRS,
-        adam: AdamConfig {
-            beta1: 0.9,
-            beta2: 0.999,
-            eps: 1e-15,
-            weight_decay: 0.0,
-        },
-        render: RenderSettings::default(),
-    };
+    let settings = settings();
     let s = RenderSettings::default();
     let mut rows = Vec::new();
     for &n in sizes {

@@ -475,6 +475,24 @@ impl TrainConfig {
         }
     }
 
+    /// What the GPU engine's resident step takes at `step` ([`gems_gpu::ResidentStep::step`]):
+    /// the loss weights, the MCMC regularisers, [`Self::gaussian_lrs`] and Adam's constants.
+    pub fn step_settings(&self, step: usize, scene_scale: f32) -> gems_gpu::StepSettings {
+        gems_gpu::StepSettings {
+            ssim_lambda: self.ssim_lambda,
+            opacity_reg: self.mcmc.opacity_reg,
+            scale_reg: self.mcmc.scale_reg,
+            lrs: self.gaussian_lrs(step, scene_scale),
+            adam: gems_gpu::AdamConfig {
+                beta1: self.adam_beta1,
+                beta2: self.adam_beta2,
+                eps: self.adam_eps,
+                weight_decay: 0.0,
+            },
+            render: gems_splat::RenderSettings::default(),
+        }
+    }
+
     /// Number of trajectory control knots for the configured kind.
     pub fn num_knots(&self) -> usize {
         self.trajectory.knots(self.bezier_knots)

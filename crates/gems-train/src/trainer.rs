@@ -27,10 +27,10 @@
 
 use std::time::Instant;
 
-use gems_gpu::{AdamConfig, GroupMoments, NoiseParams, ResidentStep, StepSettings};
+use gems_gpu::{GroupMoments, NoiseParams, ResidentStep};
 use gems_math::{Intrinsics, Se3, Trajectory};
 use gems_metrics::TrainingLoss;
-use gems_splat::{Camera, Gaussians, Gradients, RenderSettings};
+use gems_splat::{Camera, Gaussians, Gradients};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -670,20 +670,7 @@ impl Trainer {
             },
             &mut self.ws.cams,
         );
-        let c = &self.cfg;
-        let settings = StepSettings {
-            ssim_lambda: c.ssim_lambda,
-            opacity_reg: c.mcmc.opacity_reg,
-            scale_reg: c.mcmc.scale_reg,
-            lrs: c.gaussian_lrs(step, self.scene_scale),
-            adam: AdamConfig {
-                beta1: c.adam_beta1,
-                beta2: c.adam_beta2,
-                eps: c.adam_eps,
-                weight_decay: 0.0,
-            },
-            render: RenderSettings::default(),
-        };
+        let settings = self.cfg.step_settings(step, self.scene_scale);
         res.step.set_sh_degree(sh_degree);
         let out = res
             .step
