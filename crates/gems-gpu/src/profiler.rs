@@ -85,6 +85,22 @@ pub(crate) struct Profiler {
 pub(crate) type SharedProfiler = Arc<Mutex<Profiler>>;
 
 impl Profiler {
+    /// Timestamp writes around the next pass, labelled `label`; `None` (counted as untimed)
+    /// once the query set is full.
+    fn writes(&mut self, label: &'static str) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+        let index = 2 * self.labels.len() as u32;
+        if index + 2 > MAX_QUERIES {
+            self.untimed += 1;
+            return None;
+        }
+        self.labels.push(label);
+        Some(wgpu::ComputePassTimestampWrites {
+            query_set: &self.set,
+            beginning_of_pass_write_index: Some(index),
+            end_of_pass_write_index: Some(index + 1),
+        })
+    }
+
     pub(crate) fn new(device: &wgpu::Device) -> SharedProfiler {
         let set = device.create_query_set(&wgpu::QuerySetDescriptor {
             label: Some("kernel timestamps"),
@@ -106,29 +122,11 @@ pub(crate) fn begin_pass<'e>(
     encoder: &'e mut wgpu::CommandEncoder,
     label: &'static str,
 ) -> wgpu::ComputePass<'e> {
-    let Some(profiler) = profiler else {
-        return encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(label),
-            timestamp_writes: None,
-        });
-    };
-    let mut p = profiler.lock().unwrap_or_else(|e| e.into_inner());
-    let index = 2 * p.labels.len() as u32;
-    if index + 2 > MAX_QUERIES {
-        p.untimed += 1;
-        return encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(label),
-            timestamp_writes: None,
-        });
-    }
-    p.labels.push(label);
+    let mut profiler = profiler.map(|p| p.lock().unwrap_or_else(|e| e.into_inner()));
+    let timestamp_writes = profiler.as_deref_mut().and_then(|p| p.writes(label));
     encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
         label: Some(label),
-        timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
-            query_set: &p.set,
-            beginning_of_pass_write_index: Some(index),
-            end_of_pass_write_index: Some(index + 1),
-        }),
+        timestamp_writes,
     })
 }
 
