@@ -443,10 +443,17 @@ fn header_section(html: &mut String, input: &ReportInput) {
                 ("initialisation", r.init.clone()),
                 (
                     "schedule",
-                    format!(
-                        "{} steps, {} virtual views per exposure",
-                        r.steps, r.virtual_views
-                    ),
+                    match r.mean_virtual_views {
+                        Some(mean) if mean < r.virtual_views as f64 => format!(
+                            "{} steps, up to {} virtual views per exposure ({mean:.1} per step \
+                             on average, from each photo's blur length)",
+                            r.steps, r.virtual_views
+                        ),
+                        _ => format!(
+                            "{} steps, {} virtual views per exposure",
+                            r.steps, r.virtual_views
+                        ),
+                    },
                 ),
                 ("device", r.device.clone()),
                 (

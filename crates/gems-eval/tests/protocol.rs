@@ -61,6 +61,7 @@ fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
             psnr: (0..50).map(|i| 15.0 + 0.2 * i as f32).collect(),
             gaussians: vec![60; 50],
             view: vec![0; 50],
+            virtual_views: vec![15; 50],
         },
         seconds: 3.0,
         steps: 50,

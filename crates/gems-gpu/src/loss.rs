@@ -74,12 +74,16 @@ fn constants_wgsl() -> String {
     )
 }
 
-/// Kernels and per-size buffers of the fused blur loss for one image size and view count.
+/// Kernels and per-size buffers of the fused blur loss for one image size and up to a number of
+/// views (the count of the next evaluations is [`BlurLoss::set_views`]'s).
 pub struct BlurLoss {
     height: usize,
     width: usize,
     views: usize,
+    /// The most views the buffers hold.
+    capacity: usize,
     lambda: f32,
+    dims_value: Dims,
     dims: wgpu::Buffer,
     blur_mean: Kernel,
     ssim_horiz: Kernel,
@@ -172,7 +176,9 @@ impl BlurLoss {
             height,
             width,
             views,
+            capacity: views,
             lambda,
+            dims_value: dims,
             dims: buffers::uniform(ctx, "loss dims", &dims),
             blur_mean: Kernel::new(ctx, &fwd, "blur_mean"),
             ssim_horiz: Kernel::new(ctx, &fwd, "ssim_horiz"),
@@ -204,6 +210,32 @@ impl BlurLoss {
 
     pub fn views(&self) -> usize {
         self.views
+    }
+
+    /// The most views [`Self::set_views`] takes (the count it was made for).
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// Evaluates `views` renders from now on (1 ≤ views ≤ [`Self::capacity`]): the mean and its
+    /// gradient are over that many, with the buffers made for the capacity, so that a run whose
+    /// view count changes from step to step keeps one loss per image size. The new count reaches
+    /// the GPU with the next submission (after the work already submitted).
+    pub fn set_views(&mut self, ctx: &GpuContext, views: usize) -> Result<(), GpuError> {
+        if views == 0 || views > self.capacity {
+            return Err(GpuError::Shape(format!(
+                "{views} views for a loss made for 1 to {}",
+                self.capacity
+            )));
+        }
+        if views != self.views {
+            self.views = views;
+            self.dims_value.views = views as u32;
+            self.dims_value.inv_views = 1.0 / views as f32;
+            ctx.queue
+                .write_buffer(&self.dims, 0, bytemuck::bytes_of(&self.dims_value));
+        }
+        Ok(())
     }
 
     pub fn lambda(&self) -> f32 {

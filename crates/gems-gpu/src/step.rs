@@ -79,8 +79,8 @@ pub struct ResidentStep {
     adam: GpuAdam,
     mcmc: GpuMcmc,
     reg: GpuRegularizers,
-    /// One loss per (height, width, views, λ bits).
-    losses: Vec<((usize, usize, usize, u32), BlurLoss)>,
+    /// One loss per (height, width, λ bits), made for the most views a step there has had.
+    losses: Vec<((usize, usize, u32), BlurLoss)>,
     /// Each view's image, uploaded at its first step.
     targets: Vec<Option<wgpu::Buffer>>,
     /// The renders of a chunked batch, `[n,H,W,3]`.
@@ -425,13 +425,28 @@ impl ResidentStep {
         views: usize,
         lambda: f32,
     ) -> Result<usize, GpuError> {
-        let key = (h, w, views, lambda.to_bits());
-        if let Some(i) = self.losses.iter().position(|(k, _)| *k == key) {
-            return Ok(i);
+        // One loss per image size, made for the most views seen at that size: a run whose view
+        // count adapts per step (gems-train's `virtual_view_spacing_px`) reuses it.
+        let key = (h, w, lambda.to_bits());
+        match self.losses.iter().position(|(k, _)| *k == key) {
+            Some(i) if self.losses[i].1.capacity() >= views => {
+                self.losses[i].1.set_views(&self.ctx, views)?;
+                Ok(i)
+            }
+            found => {
+                let loss = BlurLoss::new(&self.ctx, h, w, views, lambda)?;
+                match found {
+                    Some(i) => {
+                        self.losses[i].1 = loss;
+                        Ok(i)
+                    }
+                    None => {
+                        self.losses.push((key, loss));
+                        Ok(self.losses.len() - 1)
+                    }
+                }
+            }
         }
-        let loss = BlurLoss::new(&self.ctx, h, w, views, lambda)?;
-        self.losses.push((key, loss));
-        Ok(self.losses.len() - 1)
     }
 
     /// The resident image of `view`, uploaded now if this is its first step at this size.

@@ -273,3 +273,34 @@ fn bad_sizes_are_errors() {
     let err = loss.run(ctx, &short, &target).unwrap_err();
     assert!(err.to_string().contains("renders"), "{err}");
 }
+
+#[test]
+fn a_loss_made_for_more_views_gives_the_same_bits_for_fewer() {
+    let ctx = ctx();
+    let (h, w, lambda) = (23, 31, 0.3);
+    let target = image(h, w, 5);
+    let t = buffers::upload(ctx, "target", &target).unwrap();
+    let len = h * w * 3;
+    let mut shared = BlurLoss::new(ctx, h, w, 6, lambda).unwrap();
+    assert_eq!((shared.views(), shared.capacity()), (6, 6));
+    // Down to one view, up to the capacity again, then down to three.
+    for n in [1, 6, 3] {
+        shared.set_views(ctx, n).unwrap();
+        assert_eq!(shared.views(), n);
+        let stack = renders(h, w, n, 40 + n as u64);
+        let r = buffers::upload(ctx, "renders", &stack).unwrap();
+        shared.run(ctx, &r, &t).unwrap();
+        let own = run_gpu(h, w, n, lambda, &stack, &target);
+        assert_eq!(shared.read(ctx).unwrap(), own.scalars, "{n} views");
+        let blurred: Vec<f32> = buffers::download(ctx, shared.blurred(), 0, len).unwrap();
+        let d_renders: Vec<f32> = buffers::download(ctx, shared.d_renders(), 0, len * n).unwrap();
+        assert_eq!(blurred, own.blurred, "{n} views");
+        assert_eq!(d_renders, own.d_renders, "{n} views");
+    }
+    for bad in [0, 7] {
+        assert!(matches!(
+            shared.set_views(ctx, bad),
+            Err(GpuError::Shape(_))
+        ));
+    }
+}

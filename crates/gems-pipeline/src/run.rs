@@ -215,6 +215,7 @@ pub fn describe_run(
         init,
         steps: cfg.steps,
         virtual_views: cfg.num_virtual_views,
+        mean_virtual_views: None,
         device: engine.describe(),
         wall_seconds: 0.0,
         peak_memory_bytes: None,
@@ -395,6 +396,9 @@ fn train_and_export(
     output.run = job.run.clone().map(|mut run| {
         run.wall_seconds = job.started.elapsed().as_secs_f64();
         run.peak_memory_bytes = peak_memory_bytes();
+        let counts = &output.history.virtual_views;
+        run.mean_virtual_views = (!counts.is_empty())
+            .then(|| counts.iter().map(|&n| f64::from(n)).sum::<f64>() / counts.len() as f64);
         run
     });
     output.save(job.output)?;

@@ -10,7 +10,7 @@
 //! factor), and each knot j receives Σ_k J_jkᵀ · g_k.
 
 use gems_gpu::Engine;
-use gems_math::{Intrinsics, Se3, Trajectory, c2w_right_perturbation_gradient};
+use gems_math::{Intrinsics, Se3, Trajectory, Vector3, c2w_right_perturbation_gradient};
 use gems_splat::{Camera, Gaussians, Gradients};
 
 use crate::TrainError;
@@ -72,6 +72,99 @@ impl Rasterizer for Engine {
 /// The n virtual camera-to-world poses c2w₀·Δ(u_k).
 pub fn virtual_c2w(c2w_init: &Se3, traj: &Trajectory, times: &[f64]) -> Vec<Se3> {
     times.iter().map(|&u| *c2w_init * traj.eval(u)).collect()
+}
+
+/// Exposure times of `n` virtual cameras: linspace(0, 1, n) with both ends, or the midpoint
+/// alone for one camera.
+pub fn exposure_times(n: usize) -> Vec<f64> {
+    match n {
+        0 => Vec::new(),
+        1 => vec![0.5],
+        _ => (0..n).map(|k| k as f64 / (n - 1) as f64).collect(),
+    }
+}
+
+/// The scene depths at which a view's blur length is measured: the 10th percentile (near
+/// content, which translation blurs most) and the median of the depths of `means` that lie in
+/// front of the camera `c2w` and inside its image; `None` when fewer than 8 do. At most about
+/// 20 000 points are read (an even stride), so the cost does not grow with the scene.
+pub fn blur_depths(means: &[[f32; 3]], c2w: &Se3, k: &Intrinsics) -> Option<[f32; 2]> {
+    let w2c = c2w.inverse();
+    let stride = means.len().div_ceil(20_000).max(1);
+    let mut depths: Vec<f64> = means
+        .iter()
+        .step_by(stride)
+        .filter_map(|m| {
+            let p = w2c.act(&Vector3::new(m[0] as f64, m[1] as f64, m[2] as f64));
+            let x = k.fx * p.x / p.z + k.cx;
+            let y = k.fy * p.y / p.z + k.cy;
+            let inside = p.z > 0.0
+                && (0.0..k.width as f64).contains(&x)
+                && (0.0..k.height as f64).contains(&y);
+            inside.then_some(p.z)
+        })
+        .collect();
+    if depths.len() < 8 {
+        return None;
+    }
+    depths.sort_by(f64::total_cmp);
+    let at = |q: f64| depths[((depths.len() - 1) as f64 * q).round() as usize] as f32;
+    Some([at(0.1), at(0.5)])
+}
+
+/// Samples of the exposure at which [`blur_length_px`] follows image paths.
+const PATH_SAMPLES: usize = 17;
+
+/// Length in pixels (of `k`) of the longest image path drawn over the exposure by nine probe
+/// points: a 3×3 grid of pixels at 1/6, 1/2 and 5/6 of the image, each at both `depths`, placed
+/// by the mid-exposure camera c2w₀·Δ(½) and followed through the cameras c2w₀·Δ(u) at 17 evenly
+/// spaced times. Rotation moves every probe and translation the near ones most, so the longest
+/// path bounds the blur the photo shows. Infinite when a probe passes behind a camera.
+pub fn blur_length_px(c2w_init: &Se3, traj: &Trajectory, k: &Intrinsics, depths: [f32; 2]) -> f64 {
+    let w2c: Vec<Se3> = exposure_times(PATH_SAMPLES)
+        .iter()
+        .map(|&u| (*c2w_init * traj.eval(u)).inverse())
+        .collect();
+    let mid = *c2w_init * traj.eval(0.5);
+    let (w, h) = (k.width as f64, k.height as f64);
+    let mut longest = 0.0f64;
+    for fy in [1.0 / 6.0, 0.5, 5.0 / 6.0] {
+        for fx in [1.0 / 6.0, 0.5, 5.0 / 6.0] {
+            let ray = Vector3::new((fx * w - k.cx) / k.fx, (fy * h - k.cy) / k.fy, 1.0);
+            for z in depths {
+                let world = mid.act(&(ray * z as f64));
+                let mut length = 0.0;
+                let mut prev: Option<(f64, f64)> = None;
+                for c in &w2c {
+                    let p = c.act(&world);
+                    if p.z.is_nan() || p.z <= 0.0 {
+                        return f64::INFINITY;
+                    }
+                    let xy = (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy);
+                    if let Some((x0, y0)) = prev {
+                        length += (xy.0 - x0).hypot(xy.1 - y0);
+                    }
+                    prev = Some(xy);
+                }
+                longest = longest.max(length);
+            }
+        }
+    }
+    longest
+}
+
+/// Virtual views for a blur of `length_px` pixels with adjacent views at most `spacing_px`
+/// apart: ⌈length / spacing⌉ + 1, at most `cap`, and 1 when the blur is under half the spacing
+/// (the photo is sharp at this resolution). `spacing_px` = 0 or a non-finite length gives `cap`.
+pub fn virtual_view_count(length_px: f64, spacing_px: f64, cap: usize) -> usize {
+    if spacing_px.is_nan() || spacing_px <= 0.0 || !length_px.is_finite() {
+        return cap;
+    }
+    if length_px < 0.5 * spacing_px {
+        return 1.min(cap);
+    }
+    let n = (length_px / spacing_px).ceil() + 1.0;
+    if n >= cap as f64 { cap } else { n as usize }
 }
 
 /// Reusable per-step buffers (no allocation per step once sized).
@@ -172,5 +265,135 @@ pub fn accumulate_knot_gradients(
         let dt = d_translation[k].map(|v| v as f64);
         let g_delta = c2w_right_perturbation_gradient(&w2c, &dr, &dt);
         traj.accumulate_knot_gradients(u, &g_delta, knot_grads);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gems_math::TrajectoryKind;
+
+    fn camera() -> Intrinsics {
+        Intrinsics {
+            fx: 300.0,
+            fy: 300.0,
+            cx: 200.0,
+            cy: 135.0,
+            width: 400,
+            height: 270,
+        }
+    }
+
+    /// A linear trajectory from Exp(ξ₀) to Exp(ξ₁).
+    fn linear(start: [f64; 6], end: [f64; 6]) -> Trajectory {
+        Trajectory::new(TrajectoryKind::Linear, vec![start, end]).unwrap()
+    }
+
+    #[test]
+    fn exposure_times_are_linspace_or_the_midpoint() {
+        assert_eq!(exposure_times(1), vec![0.5]);
+        assert_eq!(exposure_times(3), vec![0.0, 0.5, 1.0]);
+        let t = exposure_times(15);
+        assert_eq!((t.len(), t[0], t[14]), (15, 0.0, 1.0));
+    }
+
+    #[test]
+    fn view_count_spaces_adjacent_views_at_most_the_spacing_apart() {
+        assert_eq!(virtual_view_count(0.0, 1.0, 15), 1);
+        assert_eq!(virtual_view_count(0.49, 1.0, 15), 1);
+        assert_eq!(virtual_view_count(0.5, 1.0, 15), 2);
+        assert_eq!(virtual_view_count(1.0, 1.0, 15), 2);
+        assert_eq!(virtual_view_count(4.2, 1.0, 15), 6);
+        assert_eq!(virtual_view_count(4.2, 2.0, 15), 4);
+        assert_eq!(virtual_view_count(13.9, 1.0, 15), 15);
+        assert_eq!(virtual_view_count(300.0, 1.0, 15), 15);
+        assert_eq!(virtual_view_count(f64::INFINITY, 1.0, 15), 15);
+        assert_eq!(virtual_view_count(f64::NAN, 1.0, 15), 15);
+        // Spacing 0 turns adaptation off; a cap of one is kept.
+        assert_eq!(virtual_view_count(0.0, 0.0, 15), 15);
+        assert_eq!(virtual_view_count(0.0, 1.0, 1), 1);
+        assert_eq!(virtual_view_count(9.0, 1.0, 1), 1);
+        // Property: with n views over L pixels the gap is at most the spacing, and with one
+        // view fewer (from three up) it would not be.
+        for i in 0..400 {
+            let length = i as f64 * 0.037;
+            let n = virtual_view_count(length, 1.0, 1000);
+            assert!(n == 1 || length / (n - 1) as f64 <= 1.0, "{length} → {n}");
+            assert!(n < 3 || length / (n - 2) as f64 > 1.0, "{length} → {n}");
+        }
+    }
+
+    #[test]
+    fn a_sideways_translation_blurs_near_content_by_focal_times_baseline_over_depth() {
+        let k = camera();
+        // The camera slides 0.2 along its x axis over the exposure, centred on c2w₀.
+        let traj = linear(
+            [-0.1, 0.0, 0.0, 0.0, 0.0, 0.0],
+            [0.1, 0.0, 0.0, 0.0, 0.0, 0.0],
+        );
+        let c2w = Se3::exp(&gems_math::Vector6::new(0.3, -0.2, 0.1, 0.05, 0.1, -0.02));
+        let length = blur_length_px(&c2w, &traj, &k, [2.0, 5.0]);
+        assert!((length - 300.0 * 0.2 / 2.0).abs() < 1e-9, "{length}");
+        // Only the far depth: less blur.
+        let far = blur_length_px(&c2w, &traj, &k, [5.0, 5.0]);
+        assert!((far - 300.0 * 0.2 / 5.0).abs() < 1e-9, "{far}");
+        // A still camera draws no path.
+        let still = linear([0.0; 6], [0.0; 6]);
+        assert!(blur_length_px(&c2w, &still, &k, [2.0, 5.0]) < 1e-9);
+    }
+
+    #[test]
+    fn a_pan_blurs_every_depth_by_about_focal_times_angle() {
+        let k = camera();
+        let b = 0.02;
+        let traj = linear([0.0, 0.0, 0.0, 0.0, -b, 0.0], [0.0, 0.0, 0.0, 0.0, b, 0.0]);
+        let c2w = Se3::identity();
+        let near = blur_length_px(&c2w, &traj, &k, [1.0, 1.0]);
+        let far = blur_length_px(&c2w, &traj, &k, [50.0, 50.0]);
+        assert!((near - far).abs() < 1e-6, "{near} {far}");
+        // The centre probe moves f·(tan b + tan b); the side probes up to (1 + (x/f)²) times that.
+        let centre = 2.0 * 300.0 * b.tan();
+        let side = 1.0 + (200.0 * 2.0 / 3.0 / 300.0f64).powi(2);
+        assert!(
+            near >= centre - 1e-9 && near <= centre * side * 1.01,
+            "{near} {centre}"
+        );
+    }
+
+    #[test]
+    fn a_probe_passing_behind_the_camera_asks_for_every_view() {
+        let k = camera();
+        // Forward by 3 over the exposure with content 1 in front of the mid pose.
+        let traj = linear(
+            [0.0, 0.0, -1.5, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 1.5, 0.0, 0.0, 0.0],
+        );
+        let length = blur_length_px(&Se3::identity(), &traj, &k, [1.0, 1.0]);
+        assert_eq!(length, f64::INFINITY);
+        assert_eq!(virtual_view_count(length, 1.0, 15), 15);
+    }
+
+    #[test]
+    fn blur_depths_are_the_near_and_median_depths_of_the_points_in_view() {
+        let k = camera();
+        let c2w = Se3::exp(&gems_math::Vector6::new(1.0, 2.0, 3.0, 0.1, -0.2, 0.3));
+        // Points on the optical axis at depths 1..=100, plus points behind and out of view.
+        let mut means: Vec<[f32; 3]> = (1..=100)
+            .map(|d| {
+                let p = c2w.act(&Vector3::new(0.0, 0.0, d as f64));
+                [p.x as f32, p.y as f32, p.z as f32]
+            })
+            .collect();
+        for far_off in [
+            Vector3::new(0.0, 0.0, -5.0),
+            Vector3::new(100.0, 0.0, 1.0),
+            Vector3::new(0.0, -100.0, 1.0),
+        ] {
+            let p = c2w.act(&far_off);
+            means.push([p.x as f32, p.y as f32, p.z as f32]);
+        }
+        let [near, median] = blur_depths(&means, &c2w, &k).unwrap();
+        assert!((near - 11.0).abs() < 0.01 && (median - 51.0).abs() < 0.01);
+        assert_eq!(blur_depths(&means[..5], &c2w, &k), None);
     }
 }

@@ -28,6 +28,10 @@ struct CheckpointMeta {
     order: Vec<u32>,
     order_pos: usize,
     history: History,
+    /// Absent in checkpoints written before virtual-view counts adapted: those views keep the
+    /// configured count.
+    #[serde(default)]
+    blur_depths: Vec<Option<[f32; 2]>>,
     seconds: f64,
     config: TrainConfig,
 }
@@ -87,6 +91,7 @@ pub fn save_checkpoint(dir: &Path, t: &Trainer) -> Result<(), TrainError> {
         order: s.order.clone(),
         order_pos: s.order_pos,
         history: s.history.clone(),
+        blur_depths: s.blur_depths.clone(),
         seconds: s.seconds,
         config: t.cfg.clone(),
     };
@@ -162,6 +167,7 @@ pub fn load_checkpoint(dir: &Path) -> Result<(TrainConfig, TrainState), TrainErr
         order: meta.order,
         order_pos: meta.order_pos,
         history: meta.history,
+        blur_depths: meta.blur_depths,
         seconds: meta.seconds,
     };
     Ok((meta.config, state))

@@ -326,8 +326,22 @@ pub const MAX_COARSE_LEVELS: u32 = 4;
 pub struct TrainConfig {
     pub steps: usize,
     pub seed: u64,
-    /// Virtual sharp cameras per blurry image, at u = linspace(0, 1, n).
+    /// Virtual sharp cameras per blurry image, at u = linspace(0, 1, n); with
+    /// `virtual_view_spacing_px` > 0, the most a step renders.
     pub num_virtual_views: usize,
+    /// Image-space distance, in pixels at the step's resolution, that adjacent virtual views
+    /// may be apart: once counts adapt (`adaptive_views_from`), each step renders
+    /// n = ⌈L / spacing⌉ + 1 virtual views (at most `num_virtual_views`; 1 when L is under half
+    /// the spacing), where L is the longest image path a scene point draws over the view's
+    /// current trajectory ([`crate::blur::blur_length_px`]): a nearly sharp photo costs one
+    /// render instead of n, as BAD-Gaussians users ask (adjacent views about a pixel apart).
+    /// 0 = always `num_virtual_views` (the GeMS paper). Default 1 (BENCHMARKS.md, "Virtual
+    /// views from the blur length").
+    pub virtual_view_spacing_px: f64,
+    /// Fraction of the run during which every step renders `num_virtual_views` before counts
+    /// adapt: trajectories start as points (`pose.knot_init_std`) and learn their length with
+    /// the full count first. Default 0.3, the coarse-to-fine phase's end.
+    pub adaptive_views_from: f64,
     pub trajectory: TrajectoryKind,
     /// Control knots of the Bézier trajectory (9 = degree 8).
     pub bezier_knots: usize,
@@ -359,6 +373,8 @@ impl Default for TrainConfig {
             steps: REFERENCE_STEPS,
             seed: 0,
             num_virtual_views: 15,
+            virtual_view_spacing_px: 1.0,
+            adaptive_views_from: 0.3,
             trajectory: TrajectoryKind::Bezier,
             bezier_knots: BEZIER_DEFAULT_KNOTS,
             ssim_lambda: 0.3,
@@ -411,6 +427,12 @@ impl TrainConfig {
         }
         if self.num_virtual_views == 0 {
             return Err("num_virtual_views must be >= 1".into());
+        }
+        if !(self.virtual_view_spacing_px.is_finite() && self.virtual_view_spacing_px >= 0.0) {
+            return Err("virtual_view_spacing_px must be finite and >= 0".into());
+        }
+        if !(0.0..=1.0).contains(&self.adaptive_views_from) {
+            return Err("adaptive_views_from must be in [0, 1]".into());
         }
         if self.trajectory == TrajectoryKind::Bezier && self.bezier_knots < 1 {
             return Err("bezier_knots must be >= 1".into());
@@ -500,11 +522,12 @@ impl TrainConfig {
 
     /// Exposure times of the virtual cameras: linspace(0, 1, n), endpoints included.
     pub fn virtual_times(&self) -> Vec<f64> {
-        let n = self.num_virtual_views;
-        if n == 1 {
-            return vec![0.5];
-        }
-        (0..n).map(|k| k as f64 / (n - 1) as f64).collect()
+        crate::blur::exposure_times(self.num_virtual_views)
+    }
+
+    /// Whether the virtual-view count adapts to the blur length at `step`.
+    pub fn adapts_views_at(&self, step: usize) -> bool {
+        self.virtual_view_spacing_px > 0.0 && step >= self.steps_of(self.adaptive_views_from)
     }
 
     /// Converts a fraction of the run into a step count (at least 1 for periods).

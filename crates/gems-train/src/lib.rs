@@ -29,7 +29,7 @@
 //! GPU engine, on the same adapter and driver).
 // The CPU reference of gems-gpu's optimiser kernels (tested against it), hence public.
 pub mod adam;
-mod blur;
+pub(crate) mod blur;
 mod checkpoint;
 mod config;
 mod init;
@@ -41,8 +41,9 @@ mod tensors;
 mod trainer;
 
 pub use blur::{
-    BlurWorkspace, Exposure, Rasterizer, accumulate_knot_gradients, backward_blurred,
-    render_blurred, virtual_c2w, virtual_cameras,
+    BlurWorkspace, Exposure, Rasterizer, accumulate_knot_gradients, backward_blurred, blur_depths,
+    blur_length_px, exposure_times, render_blurred, virtual_c2w, virtual_cameras,
+    virtual_view_count,
 };
 pub use checkpoint::{
     CHECKPOINT_JSON, CHECKPOINT_TENSORS, has_checkpoint, load_checkpoint, save_checkpoint,

@@ -57,8 +57,12 @@ pub struct RunDescription {
     pub init: String,
     /// Steps in all (a first pass and the run proper together).
     pub steps: usize,
-    /// Virtual views per exposure.
+    /// Virtual views per exposure (the most a step renders when counts adapt).
     pub virtual_views: usize,
+    /// Virtual views a step rendered on average (`None` in outputs written before counts
+    /// adapted).
+    #[serde(default)]
+    pub mean_virtual_views: Option<f64>,
     /// The splatting engine's device.
     pub device: String,
     /// Wall time from opening the scene to the end of training (initialisation included), s.

@@ -88,6 +88,10 @@ pub struct History {
     pub gaussians: Vec<u32>,
     /// Training image index of each step.
     pub view: Vec<u32>,
+    /// Virtual views each step rendered (`virtual_view_spacing_px`); empty in checkpoints
+    /// written before counts adapted.
+    #[serde(default)]
+    pub virtual_views: Vec<u32>,
 }
 
 /// All mutable training state (exactly what a checkpoint holds).
@@ -108,6 +112,11 @@ pub struct TrainState {
     pub order: Vec<u32>,
     pub order_pos: usize,
     pub history: History,
+    /// Per view, the scene depths its blur length is measured at ([`crate::blur_depths`] of the
+    /// initial Gaussians): fixed at the start of a run, so that the virtual-view count does not
+    /// depend on where the Gaussians are (host or GPU). `None` (or empty, in checkpoints written
+    /// before counts adapted): the view always renders `num_virtual_views`.
+    pub blur_depths: Vec<Option<[f32; 2]>>,
     /// Wall-clock training seconds so far (excluded from bit-identity).
     pub seconds: f64,
 }
@@ -119,6 +128,8 @@ pub struct StepReport {
     pub loss: f32,
     pub psnr: f32,
     pub gaussians: usize,
+    /// Virtual views the step rendered.
+    pub virtual_views: usize,
 }
 
 /// The trajectory of view `v` from the flat knot array.
@@ -260,6 +271,11 @@ impl Trainer {
             .map(|_| rand_distr::Distribution::sample(&normal, &mut rng) as f32)
             .collect();
         let n = input.gaussians.len();
+        let blur_depths = input
+            .views
+            .iter()
+            .map(|v| crate::blur_depths(&input.gaussians.means, &v.c2w_init, &v.intrinsics))
+            .collect();
         let mut gaussians = input.gaussians;
         gaussians.sh_degree = 0;
         let state = TrainState {
@@ -273,6 +289,7 @@ impl Trainer {
             order: Vec::new(),
             order_pos: 0,
             history: History::default(),
+            blur_depths,
             seconds: 0.0,
         };
         let mut t = Self::assemble(
@@ -297,6 +314,13 @@ impl Trainer {
         state: TrainState,
     ) -> Result<Self, TrainError> {
         let expect = cfg.num_knots() * 6 * views.len();
+        if !(state.blur_depths.is_empty() || state.blur_depths.len() == views.len()) {
+            return Err(TrainError::Input(format!(
+                "checkpoint does not match this run: blur depths of {} views for {} views",
+                state.blur_depths.len(),
+                views.len()
+            )));
+        }
         if state.knots.len() != expect || state.adam.means.rows() != state.gaussians.len() {
             return Err(TrainError::Input(format!(
                 "checkpoint does not match this run: {} knot values (expected {expect}), {} Adam rows for {} Gaussians",
@@ -488,6 +512,25 @@ impl Trainer {
             .min(self.coarse.len() as u32)
     }
 
+    /// The exposure times step `step` renders for view `v`: the configured count, or once
+    /// counts adapt ([`TrainConfig::adapts_views_at`]) as many as the view's current blur length
+    /// at this step's resolution needs ([`crate::virtual_view_count`]).
+    fn render_times(&self, v: usize, traj: &Trajectory, step: usize) -> Vec<f64> {
+        let depths = self.state.blur_depths.get(v).copied().flatten();
+        let (Some(depths), true) = (depths, self.cfg.adapts_views_at(step)) else {
+            return self.times.clone();
+        };
+        let level = self.resolution_level(step);
+        let (k, _) = view_at_level(&self.views, &self.coarse, v, level);
+        let length = crate::blur_length_px(&self.views[v].c2w_init, traj, &k, depths);
+        let n = crate::virtual_view_count(
+            length,
+            self.cfg.virtual_view_spacing_px,
+            self.cfg.num_virtual_views,
+        );
+        crate::exposure_times(n)
+    }
+
     fn loss_for(&mut self, w: u32, h: u32) -> Result<usize, TrainError> {
         if let Some(i) = self.losses.iter().position(|(s, _)| *s == (w, h)) {
             return Ok(i);
@@ -515,11 +558,14 @@ impl Trainer {
         for kg in &mut self.knot_grads {
             *kg = [0.0; 6];
         }
+        let times = self.render_times(v, &traj, step);
         let (mut loss, train_psnr) = if self.resident.is_some() {
-            self.gaussian_step_resident(v, bg, &traj, step, sh_degree)?
+            self.gaussian_step_resident(v, bg, &traj, &times, step, sh_degree)?
         } else {
-            self.gaussian_step_host(v, bg, &traj, step)?
+            self.gaussian_step_host(v, bg, &traj, &times, step)?
         };
+        // The trajectory energies sample the exposure at the configured count whatever this
+        // step rendered: they are cheap and their weights were tuned at that count.
         if self.cfg.pose.optimize {
             loss += gems_math::uneven_speed_energy(
                 &traj,
@@ -572,6 +618,7 @@ impl Trainer {
         h.psnr.push(train_psnr);
         h.gaussians.push(count as u32);
         h.view.push(v as u32);
+        h.virtual_views.push(times.len() as u32);
         self.state.step += 1;
         self.state.rng_word_pos = self.rng.get_word_pos();
         if let Some(res) = &mut self.resident {
@@ -588,6 +635,7 @@ impl Trainer {
             loss,
             psnr: train_psnr,
             gaussians: count,
+            virtual_views: times.len(),
         })
     }
 
@@ -598,6 +646,7 @@ impl Trainer {
         v: usize,
         bg: [f32; 3],
         traj: &Trajectory,
+        times: &[f64],
         step: usize,
     ) -> Result<(f32, f32), TrainError> {
         let level = self.resolution_level(step);
@@ -608,7 +657,7 @@ impl Trainer {
         let exposure = Exposure {
             c2w_init: &view.c2w_init,
             trajectory: traj,
-            times: &self.times,
+            times,
             intrinsics: &k,
         };
         render_blurred(
@@ -627,7 +676,7 @@ impl Trainer {
         let exposure = Exposure {
             c2w_init: &view.c2w_init,
             trajectory: traj,
-            times: &self.times,
+            times,
             intrinsics: &k,
         };
         let mut grads = backward_blurred(
@@ -650,6 +699,7 @@ impl Trainer {
         v: usize,
         bg: [f32; 3],
         traj: &Trajectory,
+        times: &[f64],
         step: usize,
         sh_degree: u32,
     ) -> Result<(f32, f32), TrainError> {
@@ -665,7 +715,7 @@ impl Trainer {
             &Exposure {
                 c2w_init: &view.c2w_init,
                 trajectory: traj,
-                times: &self.times,
+                times,
                 intrinsics: &k,
             },
             &mut self.ws.cams,
@@ -683,7 +733,7 @@ impl Trainer {
             })?;
         accumulate_knot_gradients(
             traj,
-            &self.times,
+            times,
             &self.ws.cams,
             &out.cam_rotation,
             &out.cam_translation,
@@ -788,6 +838,7 @@ impl Trainer {
                     loss = r.loss,
                     psnr = r.psnr,
                     gaussians = r.gaussians,
+                    virtual_views = r.virtual_views,
                     "train"
                 );
             }

@@ -269,3 +269,67 @@ fn resident_coarse_to_fine_losses_follow_the_cpu_engine() {
         assert!((c - g).abs() <= 1e-4 * c, "step {s}: CPU loss {c}, GPU {g}");
     }
 }
+
+#[test]
+fn resident_losses_follow_the_cpu_engine_when_view_counts_adapt() {
+    let mut cfg = config(4);
+    cfg.steps = 12;
+    cfg.mcmc.noise_lr = 0.0;
+    cfg.random_background = false;
+    cfg.pose.optimize = false;
+    // Paths of a few pixels at 32×24: counts below the cap, different per view.
+    cfg.pose.knot_init_std = 0.004;
+    cfg.adaptive_views_from = 0.25;
+    cfg.lr = gems_train::LearningRates {
+        means: 0.0,
+        log_scales: 0.0,
+        quats: 0.0,
+        opacities: 0.0,
+        sh_dc: 0.0,
+        sh_rest: 0.0,
+        ..cfg.lr
+    };
+    let mut cpu = trainer(&cfg, Engine::cpu());
+    cpu.run(|_, _| Ok(())).unwrap();
+    let mut gpu_run = trainer(&cfg, gpu());
+    gpu_run.run(|_, _| Ok(())).unwrap();
+    let (hc, hg) = (
+        &cpu.state().unwrap().history,
+        &gpu_run.state().unwrap().history,
+    );
+    eprintln!("views {:?}, counts {:?}", hc.view, hc.virtual_views);
+    // The cap first, then fewer (and not all the same), so the GPU loss shrinks and grows.
+    assert!(hc.virtual_views[..3].iter().all(|&n| n == 4));
+    let adapted = &hc.virtual_views[3..];
+    assert!(adapted.iter().any(|&n| n < 4), "{adapted:?}");
+    assert!(adapted.iter().any(|&n| n != adapted[0]), "{adapted:?}");
+    // Nothing is trained, so each (view, count) has one loss; the engines draw the view order
+    // differently, so compare them by (view, count).
+    let mut seen = 0;
+    for (s, ((&vc, &nc), c)) in hc
+        .view
+        .iter()
+        .zip(&hc.virtual_views)
+        .zip(&hc.loss)
+        .enumerate()
+    {
+        for ((&vg, &ng), g) in hg.view.iter().zip(&hg.virtual_views).zip(&hg.loss) {
+            if (vg, ng) == (vc, nc) {
+                seen += 1;
+                assert!((c - g).abs() <= 1e-4 * c, "step {s}: CPU loss {c}, GPU {g}");
+            }
+        }
+    }
+    assert!(seen >= 12, "{seen} matching steps");
+    // After the start a view's count is the same on both engines.
+    for (&v, &n) in hg.view.iter().zip(&hg.virtual_views).skip(3) {
+        let cpu_counts: Vec<u32> = (3..12)
+            .filter(|&s| hc.view[s] == v)
+            .map(|s| hc.virtual_views[s])
+            .collect();
+        assert!(
+            cpu_counts.iter().all(|&c| c == n),
+            "view {v}: GPU {n}, CPU {cpu_counts:?}"
+        );
+    }
+}

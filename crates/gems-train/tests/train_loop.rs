@@ -43,6 +43,39 @@ fn same(a: &TrainState, b: &TrainState) {
     assert_eq!(a.knot_grad_acc, b.knot_grad_acc);
     assert_eq!(a.rng_word_pos, b.rng_word_pos);
     assert_eq!(a.history, b.history);
+    assert_eq!(a.blur_depths, b.blur_depths);
+}
+
+#[test]
+fn virtual_views_follow_each_photos_blur_length() {
+    let counts = |cfg: &TrainConfig| -> Vec<u32> {
+        let mut t = trainer(cfg);
+        t.run(|_, _| Ok(())).unwrap();
+        let s = t.state().unwrap();
+        assert!(s.blur_depths.iter().all(Option::is_some));
+        s.history.virtual_views.clone()
+    };
+    // Counts adapt from step round(0.3 · 24) = 7.
+    let start = 7;
+    // Poses held at (nearly) a point: one render per step once counts adapt.
+    let mut still = small_config();
+    still.pose.optimize = false;
+    still.pose.knot_init_std = 1e-7;
+    let n = counts(&still);
+    assert_eq!(n.len(), 24);
+    assert!(n[..start].iter().all(|&c| c == 4), "{n:?}");
+    assert!(n[start..].iter().all(|&c| c == 1), "{n:?}");
+    // Wide random paths: the configured count throughout.
+    let mut wide = still.clone();
+    wide.pose.knot_init_std = 0.05;
+    assert!(counts(&wide).iter().all(|&c| c == 4));
+    // Spacing 0 (the paper): the configured count for the nearly still poses too.
+    still.virtual_view_spacing_px = 0.0;
+    assert!(counts(&still).iter().all(|&c| c == 4));
+    // Counts from the start when the fraction is 0.
+    still.virtual_view_spacing_px = 1.0;
+    still.adaptive_views_from = 0.0;
+    assert!(counts(&still).iter().all(|&c| c == 1));
 }
 
 #[test]
