@@ -112,14 +112,19 @@ pub fn blur_depths(means: &[[f32; 3]], c2w: &Se3, k: &Intrinsics) -> Option<[f32
     Some([at(0.1), at(0.5)])
 }
 
-/// Samples of the exposure at which [`blur_length_px`] follows image paths.
+/// Samples of the exposure at which [`blur_length_px`] places the probes.
 const PATH_SAMPLES: usize = 17;
 
-/// Length in pixels (of `k`) of the longest image path drawn over the exposure by nine probe
-/// points: a 3×3 grid of pixels at 1/6, 1/2 and 5/6 of the image, each at both `depths`, placed
-/// by the mid-exposure camera c2w₀·Δ(½) and followed through the cameras c2w₀·Δ(u) at 17 evenly
-/// spaced times. Rotation moves every probe and translation the near ones most, so the longest
-/// path bounds the blur the photo shows. Infinite when a probe passes behind a camera.
+/// The blur's extent in pixels (of `k`): the widest spread of the image positions that nine
+/// probe points take over the exposure (the largest distance between two of a probe's positions,
+/// the largest over probes). The probes are a 3×3 grid of pixels at 1/6, 1/2 and 5/6 of the
+/// image, each at both `depths`, placed by the mid-exposure camera c2w₀·Δ(½) and followed
+/// through the cameras c2w₀·Δ(u) at 17 evenly spaced times. Rotation moves every probe and
+/// translation the near ones most, so the widest spread bounds the blur the photo shows. The
+/// spread, not the path's length: trained paths wiggle (on a `gems synth` scene with 3 px of
+/// blur the centre probe's path was 9 px long within a 3 px spread, BENCHMARKS.md), and the
+/// time-average of images along a path that stays within a few pixels is a blur of those few
+/// pixels. Infinite when a probe passes behind a camera.
 pub fn blur_length_px(c2w_init: &Se3, traj: &Trajectory, k: &Intrinsics, depths: [f32; 2]) -> f64 {
     let w2c: Vec<Se3> = exposure_times(PATH_SAMPLES)
         .iter()
@@ -127,30 +132,29 @@ pub fn blur_length_px(c2w_init: &Se3, traj: &Trajectory, k: &Intrinsics, depths:
         .collect();
     let mid = *c2w_init * traj.eval(0.5);
     let (w, h) = (k.width as f64, k.height as f64);
-    let mut longest = 0.0f64;
+    let mut widest = 0.0f64;
+    let mut seen: Vec<(f64, f64)> = Vec::with_capacity(PATH_SAMPLES);
     for fy in [1.0 / 6.0, 0.5, 5.0 / 6.0] {
         for fx in [1.0 / 6.0, 0.5, 5.0 / 6.0] {
             let ray = Vector3::new((fx * w - k.cx) / k.fx, (fy * h - k.cy) / k.fy, 1.0);
             for z in depths {
                 let world = mid.act(&(ray * z as f64));
-                let mut length = 0.0;
-                let mut prev: Option<(f64, f64)> = None;
+                seen.clear();
                 for c in &w2c {
                     let p = c.act(&world);
                     if p.z.is_nan() || p.z <= 0.0 {
                         return f64::INFINITY;
                     }
                     let xy = (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy);
-                    if let Some((x0, y0)) = prev {
-                        length += (xy.0 - x0).hypot(xy.1 - y0);
+                    for &(x, y) in &seen {
+                        widest = widest.max((xy.0 - x).hypot(xy.1 - y));
                     }
-                    prev = Some(xy);
+                    seen.push(xy);
                 }
-                longest = longest.max(length);
             }
         }
     }
-    longest
+    widest
 }
 
 /// Virtual views for a blur of `length_px` pixels with adjacent views at most `spacing_px`
@@ -358,6 +362,21 @@ mod tests {
             near >= centre - 1e-9 && near <= centre * side * 1.01,
             "{near} {centre}"
         );
+    }
+
+    #[test]
+    fn a_path_that_turns_back_blurs_by_its_spread_not_its_length() {
+        let k = camera();
+        // Quadratic Bézier with its middle knot sideways: the camera slides out to a/2 at u = ½
+        // and back, drawing a path of length fx·a/z over a spread of fx·a/(2z).
+        let a = 0.2;
+        let traj = Trajectory::new(
+            TrajectoryKind::Bezier,
+            vec![[0.0; 6], [a, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0; 6]],
+        )
+        .unwrap();
+        let length = blur_length_px(&Se3::identity(), &traj, &k, [2.0, 4.0]);
+        assert!((length - 300.0 * a / 2.0 / 2.0).abs() < 1e-9, "{length}");
     }
 
     #[test]

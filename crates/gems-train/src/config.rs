@@ -332,7 +332,7 @@ pub struct TrainConfig {
     /// Image-space distance, in pixels at the step's resolution, that adjacent virtual views
     /// may be apart: once counts adapt (`adaptive_views_from`), each step renders
     /// n = ⌈L / spacing⌉ + 1 virtual views (at most `num_virtual_views`; 1 when L is under half
-    /// the spacing), where L is the longest image path a scene point draws over the view's
+    /// the spacing), where L is the longest spread of a scene point's images over the view's
     /// current trajectory ([`crate::blur::blur_length_px`]): a nearly sharp photo costs one
     /// render instead of n, as BAD-Gaussians users ask (adjacent views about a pixel apart).
     /// 0 = always `num_virtual_views` (the GeMS paper). Default 1 (BENCHMARKS.md, "Virtual

@@ -277,8 +277,8 @@ fn resident_losses_follow_the_cpu_engine_when_view_counts_adapt() {
     cfg.mcmc.noise_lr = 0.0;
     cfg.random_background = false;
     cfg.pose.optimize = false;
-    // Paths of a few pixels at 32×24: counts below the cap, different per view.
-    cfg.pose.knot_init_std = 0.004;
+    // Paths spreading over one to two pixels at 32×24: counts below the cap, different per view.
+    cfg.pose.knot_init_std = 0.012;
     cfg.adaptive_views_from = 0.25;
     cfg.lr = gems_train::LearningRates {
         means: 0.0,
