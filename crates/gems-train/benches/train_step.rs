@@ -3,10 +3,11 @@
 //! every group, pose accumulation, SGLD noise). MCMC refinement is outside the timed window
 //! (cap_max = N, so growth is a no-op; relocation runs only every 100 steps in the defaults).
 //!
-//! `step_…` runs the CPU engine; `gpu_step_…` the same trainer on the GPU engine (any adapter,
-//! lavapipe included: `WGPU_BACKEND=vulkan`), whose step is resident (gems-gpu
-//! `ResidentStep`); its first step, which uploads the Gaussians and the image, is outside the
-//! timed window. `…_workgroup_reduction` forces the backward rasterizer without subgroups;
+//! The count of virtual views is held fixed (`virtual_view_spacing_px = 0`); `…_fewer_views` runs
+//! the CPU step with 1, 5 and 10. `step_…` runs the CPU engine; `gpu_step_…` the same trainer on
+//! the GPU engine (any adapter, lavapipe included: `WGPU_BACKEND=vulkan`), whose step is resident
+//! (gems-gpu `ResidentStep`); its first step, which uploads the Gaussians and the image, is outside
+//! the timed window. `…_workgroup_reduction` forces the backward rasterizer without subgroups;
 //! `…_kernels` times one step's kernels with GPU timestamps and prints them.
 
 use gems_gpu::DeviceChoice;
@@ -51,7 +52,9 @@ fn scene() -> Gaussians {
     g
 }
 
-fn trainer() -> Trainer {
+/// The trainer at step 3001 of 7000 rendering `views` virtual views every step (the count held
+/// fixed: this view's path is a point, so counts following the blur would render one).
+fn trainer_with_views(views: usize) -> Trainer {
     let g = scene();
     let k = Intrinsics {
         fx: 360.0,
@@ -73,6 +76,8 @@ fn trainer() -> Trainer {
         .rgb;
     let mut cfg = TrainConfig {
         steps: 7000,
+        num_virtual_views: views,
+        virtual_view_spacing_px: 0.0,
         ..TrainConfig::default()
     };
     cfg.mcmc.cap_max = N;
@@ -108,9 +113,21 @@ fn trainer() -> Trainer {
     .unwrap()
 }
 
+fn trainer() -> Trainer {
+    trainer_with_views(15)
+}
+
 #[divan::bench(sample_count = 3, sample_size = 1)]
 fn step_400x270_100k_n15(bencher: divan::Bencher) {
     let mut t = trainer();
+    bencher.bench_local(|| t.step().unwrap());
+}
+
+/// The same step with fewer virtual views, as `virtual_view_spacing_px` chooses for photos with
+/// less blur: what a step costs besides its renders.
+#[divan::bench(args = [1, 5, 10], sample_count = 3, sample_size = 1)]
+fn step_400x270_100k_fewer_views(bencher: divan::Bencher, views: usize) {
+    let mut t = trainer_with_views(views);
     bencher.bench_local(|| t.step().unwrap());
 }
 
