@@ -30,6 +30,26 @@ fn config(seed: u64) -> TrainConfig {
     c
 }
 
+/// [`config`] for `steps` steps with nothing trained and nothing random (no noise, black
+/// background, poses fixed): each step's loss depends only on the view and the engine.
+fn frozen_config(seed: u64, steps: usize) -> TrainConfig {
+    let mut cfg = config(seed);
+    cfg.steps = steps;
+    cfg.mcmc.noise_lr = 0.0;
+    cfg.random_background = false;
+    cfg.pose.optimize = false;
+    cfg.lr = gems_train::LearningRates {
+        means: 0.0,
+        log_scales: 0.0,
+        quats: 0.0,
+        opacities: 0.0,
+        sh_dc: 0.0,
+        sh_rest: 0.0,
+        ..cfg.lr
+    };
+    cfg
+}
+
 fn trainer(cfg: &TrainConfig, engine: Engine) -> Trainer {
     let scene = common::blur_scene(3, 32, 24, 0.2, 0.02, 1);
     let mut gaussians = common::init_gaussians(&scene, 0.02, 3);
@@ -236,20 +256,7 @@ fn resident_step_reads_back_only_pose_gradients_and_scalars() {
 /// agree on all.
 #[test]
 fn resident_coarse_to_fine_losses_follow_the_cpu_engine() {
-    let mut cfg = config(3);
-    cfg.steps = 6;
-    cfg.mcmc.noise_lr = 0.0;
-    cfg.random_background = false;
-    cfg.pose.optimize = false;
-    cfg.lr = gems_train::LearningRates {
-        means: 0.0,
-        log_scales: 0.0,
-        quats: 0.0,
-        opacities: 0.0,
-        sh_dc: 0.0,
-        sh_rest: 0.0,
-        ..cfg.lr
-    };
+    let mut cfg = frozen_config(3, 6);
     cfg.coarse_to_fine = gems_train::CoarseToFineConfig {
         levels: 1,
         fraction: 0.5,
@@ -272,23 +279,10 @@ fn resident_coarse_to_fine_losses_follow_the_cpu_engine() {
 
 #[test]
 fn resident_losses_follow_the_cpu_engine_when_view_counts_adapt() {
-    let mut cfg = config(4);
-    cfg.steps = 12;
-    cfg.mcmc.noise_lr = 0.0;
-    cfg.random_background = false;
-    cfg.pose.optimize = false;
+    let mut cfg = frozen_config(4, 12);
     // Paths spreading over one to two pixels at 32×24: counts below the cap, different per view.
     cfg.pose.knot_init_std = 0.012;
     cfg.adaptive_views_from = 0.25;
-    cfg.lr = gems_train::LearningRates {
-        means: 0.0,
-        log_scales: 0.0,
-        quats: 0.0,
-        opacities: 0.0,
-        sh_dc: 0.0,
-        sh_rest: 0.0,
-        ..cfg.lr
-    };
     let mut cpu = trainer(&cfg, Engine::cpu());
     cpu.run(|_, _| Ok(())).unwrap();
     let mut gpu_run = trainer(&cfg, gpu());
