@@ -76,6 +76,7 @@ fn bundle_adjust_20_views_2000_points(bencher: divan::Bencher) {
                 huber_px: 1.0,
                 max_iters: 10,
                 focal: Focal::Free,
+                path: None,
             },
         )
     });

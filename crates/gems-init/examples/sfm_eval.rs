@@ -4,6 +4,7 @@
 //! Usage: sfm_eval <work_dir> [--views N] [--seed S] [--estimate-focal] [--levels-dir DIR]
 //!        [--working-sizes 192,128] [--grid SPACING_FRAC] [--neighbours N]
 //!        [--max-reproj PX] [--focal F] [--focal-prior REL]
+//!        [--order detect|ordered|unordered] [--path-centre SIGMA] [--path-rot DEG]
 //! With `--levels-dir`, the scene is an existing folder with `images/` and `poses_bounds.npy`
 //! (e.g. a `blur_09` level of `gems synth --blur-levels`, or a Deblur-NeRF real scene, whose
 //! poses file is its COLMAP model's) instead of a generated one. `--focal` gives the SfM that
@@ -13,7 +14,7 @@
 //! alignment, the mean relative-rotation error over all registered pairs (degrees), the focal
 //! and its error; per-view centre errors go to stderr.
 
-use gems_init::sfm::{SfmOptions, load_images, run_sfm};
+use gems_init::sfm::{CaptureOrder, SfmOptions, load_images, run_sfm};
 use std::path::PathBuf;
 
 fn main() {
@@ -32,6 +33,9 @@ fn main() {
     let mut level_dir: Option<PathBuf> = None;
     let mut given_focal: Option<f64> = None;
     let mut focal_prior: Option<f64> = None;
+    let mut order: Option<CaptureOrder> = None;
+    let mut path_centre: Option<f64> = None;
+    let mut path_rot: Option<f64> = None;
     let mut it = args[1..].iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -53,6 +57,16 @@ fn main() {
             "--levels-dir" => level_dir = Some(PathBuf::from(it.next().unwrap())),
             "--focal" => given_focal = Some(it.next().unwrap().parse().unwrap()),
             "--focal-prior" => focal_prior = Some(it.next().unwrap().parse().unwrap()),
+            "--order" => {
+                order = Some(match it.next().unwrap().as_str() {
+                    "ordered" => CaptureOrder::Ordered,
+                    "unordered" => CaptureOrder::Unordered,
+                    "detect" => CaptureOrder::Detect,
+                    o => panic!("unknown order {o}"),
+                });
+            }
+            "--path-centre" => path_centre = Some(it.next().unwrap().parse().unwrap()),
+            "--path-rot" => path_rot = Some(it.next().unwrap().parse().unwrap()),
             s => panic!("unknown argument {s}"),
         }
     }
@@ -83,6 +97,15 @@ fn main() {
     }
     if let Some(n) = neighbours {
         opts.track_neighbours = n;
+    }
+    if let Some(o) = order {
+        opts.capture_order = o;
+    }
+    if let Some(s) = path_centre {
+        opts.path_centre_sigma = s;
+    }
+    if let Some(s) = path_rot {
+        opts.path_rotation_sigma_deg = s;
     }
     if let Some(ws) = working_sizes {
         opts.working_sizes = ws;
@@ -157,6 +180,15 @@ fn main() {
             k += 1;
         }
     }
+    // The rotation between the first and the last registered camera, estimated and true: a
+    // path whose rotation errors grow from the middle outwards turns too much or too little.
+    let angle = |m: nalgebra::Matrix3<f64>| ((m.trace() - 1.0) * 0.5).clamp(-1.0, 1.0).acos();
+    let (first, last) = (&rots[0], &rots[rots.len() - 1]);
+    eprintln!(
+        "first to last camera: rotation {:.2}° estimated, {:.2}° true",
+        angle(last.0 * first.0.transpose()).to_degrees(),
+        angle(last.1 * first.1.transpose()).to_degrees()
+    );
     println!(
         "{}: registered {}/{}, points {}, rmse/extent {:.4} (rmse {:.4}, extent {:.3}), rel. rot err {:.2}°, focal {:.1} (gt {:.1}, err {:+.1} %), reproj {:.2}px, {:.1}s (features {:.1}s), blur est {:.1}px, working size {}, unregistered {:?}",
         dir.display(),

@@ -6,7 +6,7 @@
 //! chunks in parallel and reduced in chunk order, so the result does not depend on the number
 //! of threads.
 
-use gems_math::{Intrinsics, Se3};
+use gems_math::{Intrinsics, Se3, so3_left_jacobian_inv};
 use nalgebra::{DMatrix, DVector, Matrix2x3, Matrix3, Rotation3, SMatrix, Vector2, Vector3};
 use rayon::prelude::*;
 
@@ -70,10 +70,172 @@ impl Focal {
 
 /// Settings for [`bundle_adjust`].
 #[derive(Clone, Copy, Debug)]
-pub struct BaOptions {
+pub struct BaOptions<'a> {
     pub huber_px: f64,
     pub max_iters: usize,
     pub focal: Focal,
+    /// Smooth motion in capture order, when the images are known to be ordered.
+    pub path: Option<&'a PathPrior>,
+}
+
+/// A weak prior that the camera moves smoothly from one capture to the next (video frames,
+/// photos numbered as they were taken). For every three consecutive captures a, b, c it
+/// penalises
+/// - the centres' second difference c_a − 2 c_b + c_c, in units of `centre_sigma` times the
+///   mean distance between consecutive cameras (so the prior does not depend on the
+///   reconstruction's free scale: the mean is taken at the current cameras and held while a
+///   step is linearised), and
+/// - the change of the rotation step, Log(R_b R_cᵀ) − Log(R_a R_bᵀ) (each step in the body
+///   frame of the earlier camera; equal for a constant angular velocity), in units of
+///   `rotation_sigma` radians.
+///
+/// Each residual is Huber-weighted at 1σ, so a capture that jumps (a dropped frame, a photo
+/// taken from elsewhere) costs linearly instead of bending its neighbours. The same idea as a
+/// motion prior between consecutive keyframes in visual odometry; COLMAP has no counterpart.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PathPrior {
+    /// Cameras in capture order. A triple takes part only when all three are in the adjustment
+    /// (observed), so an unregistered frame splits the path instead of joining its neighbours.
+    pub order: Vec<usize>,
+    /// σ of the centres' second difference as a fraction of the mean step; 0 leaves centres out.
+    pub centre_sigma: f64,
+    /// σ of the change of the rotation step, radians; 0 leaves rotations out.
+    pub rotation_sigma: f64,
+}
+
+/// One residual of [`PathPrior`] (in units of its σ) and its Jacobians with respect to the
+/// three cameras' (ω, v), the update of [`bundle_adjust`].
+struct PathResidual {
+    cams: [usize; 3],
+    r: Vector3<f64>,
+    j: [SMatrix<f64, 3, 6>; 3],
+}
+
+impl PathPrior {
+    /// Consecutive triples of cameras all present in the adjustment.
+    fn triples<'a>(&'a self, present: &'a [bool]) -> impl Iterator<Item = [usize; 3]> + 'a {
+        self.order
+            .windows(3)
+            .filter(|w| w.iter().all(|&c| present[c]))
+            .map(|w| [w[0], w[1], w[2]])
+    }
+
+    /// Mean distance between consecutive present cameras; `None` when there is none or the
+    /// cameras coincide.
+    fn mean_step(&self, poses: &[Se3], present: &[bool]) -> Option<f64> {
+        let (mut sum, mut n) = (0.0, 0usize);
+        for w in self.order.windows(2) {
+            if present[w[0]] && present[w[1]] {
+                sum += (camera_center(&poses[w[1]]) - camera_center(&poses[w[0]])).norm();
+                n += 1;
+            }
+        }
+        (n > 0 && sum > 0.0).then(|| sum / n as f64)
+    }
+
+    fn residuals(&self, poses: &[Se3], present: &[bool], mean_step: f64) -> Vec<PathResidual> {
+        let mut out = Vec::new();
+        for cams in self.triples(present) {
+            let [a, b, c] = cams.map(|i| &poses[i]);
+            if self.centre_sigma > 0.0 {
+                let s = 1.0 / (self.centre_sigma * mean_step);
+                let r = (camera_center(a) - 2.0 * camera_center(b) + camera_center(c)) * s;
+                // c = −Rᵀt; under R ← exp(ω)R, t ← t + v: dc/dω = −Rᵀ[t]×, dc/dv = −Rᵀ.
+                let dc = |p: &Se3, k: f64| {
+                    let mut j = SMatrix::<f64, 3, 6>::zeros();
+                    j.fixed_view_mut::<3, 3>(0, 0)
+                        .copy_from(&(-p.rot.transpose() * p.trans.cross_matrix() * (k * s)));
+                    j.fixed_view_mut::<3, 3>(0, 3)
+                        .copy_from(&(-p.rot.transpose() * (k * s)));
+                    j
+                };
+                out.push(PathResidual {
+                    cams,
+                    r,
+                    j: [dc(a, 1.0), dc(b, -2.0), dc(c, 1.0)],
+                });
+            }
+            if self.rotation_sigma > 0.0 {
+                let s = 1.0 / self.rotation_sigma;
+                let m_ab = a.rot * b.rot.transpose();
+                let m_bc = b.rot * c.rot.transpose();
+                let (phi_ab, phi_bc) = (log_rotation(&m_ab), log_rotation(&m_bc));
+                // Log(exp(ω_a) M exp(−ω_b)) ≈ φ + J_l⁻¹(φ)(ω_a − M ω_b).
+                let (ja, jb) = (
+                    so3_left_jacobian_inv(&phi_ab),
+                    so3_left_jacobian_inv(&phi_bc),
+                );
+                let rot_block = |m: Matrix3<f64>| {
+                    let mut j = SMatrix::<f64, 3, 6>::zeros();
+                    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(m * s));
+                    j
+                };
+                out.push(PathResidual {
+                    cams,
+                    r: (phi_bc - phi_ab) * s,
+                    j: [
+                        rot_block(-ja),
+                        rot_block(jb + ja * m_ab),
+                        rot_block(-jb * m_bc),
+                    ],
+                });
+            }
+        }
+        out
+    }
+
+    /// The prior's robust cost at `poses`.
+    pub fn cost(&self, poses: &[Se3], present: &[bool]) -> f64 {
+        let Some(step) = self.mean_step(poses, present) else {
+            return 0.0;
+        };
+        self.residuals(poses, present, step)
+            .iter()
+            .map(|r| huber_cost(r.r.norm_squared(), 1.0))
+            .sum()
+    }
+
+    /// Adds the prior's Gauss–Newton terms (Huber-weighted JᵀJ and Jᵀr) to the reduced system.
+    fn add_to(&self, system: &mut SchurSystem, poses: &[Se3], layout: &ParamLayout) {
+        let Some(step) = self.mean_step(poses, &layout.present) else {
+            return;
+        };
+        for res in self.residuals(poses, &layout.present, step) {
+            let w = huber_weight(res.r.norm_squared(), 1.0);
+            for (x, jx) in res.cams.iter().zip(&res.j) {
+                let cx = layout.cam_col[*x];
+                if cx == usize::MAX {
+                    continue;
+                }
+                let g = jx.transpose() * res.r * w;
+                for i in 0..6 {
+                    system.b[cx + i] += g[i];
+                }
+                for (y, jy) in res.cams.iter().zip(&res.j) {
+                    let cy = layout.cam_col[*y];
+                    if cy == usize::MAX {
+                        continue;
+                    }
+                    let h = jx.transpose() * jy * w;
+                    for i in 0..6 {
+                        for k in 0..6 {
+                            system.s[(cx + i, cy + k)] += h[(i, k)];
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[inline]
+fn camera_center(p: &Se3) -> Vector3<f64> {
+    -(p.rot.transpose() * p.trans)
+}
+
+#[inline]
+fn log_rotation(m: &Matrix3<f64>) -> Vector3<f64> {
+    Rotation3::from_matrix_unchecked(*m).scaled_axis()
 }
 
 /// Outcome of [`bundle_adjust`]: robust cost before and after, iterations run.
@@ -173,7 +335,12 @@ pub fn bundle_adjust(
 ) -> BaSummary {
     let layout = ParamLayout::new(poses.len(), fixed, obs, opts.focal.refined());
     let by_point = PointObservations::new(points.len(), obs);
-    let initial_cost = total_cost(poses, points, obs, k, opts.huber_px) + opts.focal.cost(k.fx);
+    let cost_of = |poses: &[Se3], points: &[Vector3<f64>], k: &Intrinsics| {
+        total_cost(poses, points, obs, k, opts.huber_px)
+            + opts.focal.cost(k.fx)
+            + opts.path.map_or(0.0, |p| p.cost(poses, &layout.present))
+    };
+    let initial_cost = cost_of(poses, points, k);
     let mut cost = initial_cost;
     let mut lambda = 1e-3;
     let mut iterations = 0;
@@ -193,6 +360,9 @@ pub fn bundle_adjust(
                 let w = 1.0 / (sigma * sigma);
                 system.s[(fc, fc)] += w;
                 system.b[fc] += w * (k.fx - focal);
+            }
+            if let Some(path) = opts.path {
+                path.add_to(&mut system, poses, &layout);
             }
             let n = layout.n;
             for i in 0..n {
@@ -228,8 +398,7 @@ pub fn bundle_adjust(
                 new_k.fy += dc[fc];
             }
             let new_cost = if new_k.fx > 0.0 {
-                total_cost(&new_poses, &new_points, obs, &new_k, opts.huber_px)
-                    + opts.focal.cost(new_k.fx)
+                cost_of(&new_poses, &new_points, &new_k)
             } else {
                 f64::INFINITY
             };
@@ -268,6 +437,8 @@ pub fn bundle_adjust(
 struct ParamLayout {
     /// First column of each camera; `usize::MAX` for a fixed or unobserved camera.
     cam_col: Vec<usize>,
+    /// Cameras with observations (in the adjustment, free or fixed).
+    present: Vec<bool>,
     focal_col: Option<usize>,
     /// Number of columns.
     n: usize,
@@ -293,6 +464,7 @@ impl ParamLayout {
         }
         ParamLayout {
             cam_col,
+            present: seen,
             focal_col,
             n,
         }
@@ -485,6 +657,7 @@ fn back_substitute(
 mod tests {
     use super::*;
     use gems_math::camera_center_from_w2c;
+    use nalgebra::Vector6;
 
     /// Angle of the rotation between two poses' rotations.
     fn relative_angle(a: &Se3, b: &Se3) -> f64 {
@@ -576,6 +749,7 @@ mod tests {
                 huber_px: 2.0,
                 max_iters: 100,
                 focal: Focal::Free,
+                path: None,
             },
         );
         assert!(s.final_cost < 1e-10 * s.initial_cost.max(1.0), "{s:?}");
@@ -612,6 +786,7 @@ mod tests {
                     huber_px: 2.0,
                     max_iters: 100,
                     focal,
+                    path: None,
                 },
             );
             assert!(s.final_cost <= s.initial_cost, "{s:?}");
@@ -664,6 +839,7 @@ mod tests {
                 huber_px: 1.0,
                 max_iters: 50,
                 focal: Focal::Fixed,
+                path: None,
             },
         );
         for (p, g) in poses.iter().zip(&gt_poses) {
@@ -673,6 +849,163 @@ mod tests {
                 (camera_center_from_w2c(p) - camera_center_from_w2c(g)).norm()
             );
         }
+    }
+
+    /// Cameras along a gently curving path, each looking a little differently.
+    fn path_poses(n: usize) -> Vec<Se3> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64;
+                let r = Rotation3::new(Vector3::new(0.01 * t, -0.03 * t, 0.002 * t * t));
+                let c = Vector3::new(0.3 * t, 0.02 * t * t, 0.1 * (0.4 * t).sin());
+                Se3::new(r.into_inner(), -(r * c))
+            })
+            .collect()
+    }
+
+    /// The path prior's residuals against central finite differences of the same residuals
+    /// (with the mean step held, as in a linearisation), for every camera of a triple.
+    #[test]
+    fn path_prior_jacobians_match_finite_differences() {
+        let poses = path_poses(4);
+        let present = vec![true; 4];
+        let prior = PathPrior {
+            order: vec![0, 1, 2, 3],
+            centre_sigma: 0.3,
+            rotation_sigma: 0.01,
+        };
+        let step = prior.mean_step(&poses, &present).unwrap();
+        let res = prior.residuals(&poses, &present, step);
+        assert_eq!(res.len(), 4, "two triples, centre and rotation each");
+        let h = 1e-6;
+        for (ri, r) in res.iter().enumerate() {
+            for (slot, &cam) in r.cams.iter().enumerate() {
+                for i in 0..6 {
+                    let at = |sign: f64| {
+                        let mut p = poses.clone();
+                        let mut d = Vector6::zeros();
+                        d[i] = sign * h;
+                        let w: Vector3<f64> = d.fixed_rows::<3>(0).into_owned();
+                        let v: Vector3<f64> = d.fixed_rows::<3>(3).into_owned();
+                        p[cam].rot = Rotation3::new(w).into_inner() * p[cam].rot;
+                        p[cam].trans += v;
+                        prior.residuals(&p, &present, step)[ri].r
+                    };
+                    let num = (at(1.0) - at(-1.0)) / (2.0 * h);
+                    let an = r.j[slot].column(i);
+                    assert!(
+                        (num - an).norm() < 1e-5 * (1.0 + an.norm()),
+                        "residual {ri}, camera {cam}, column {i}: {num} vs {an}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The prior does not depend on the reconstruction's scale, and a path with constant
+    /// velocity and angular velocity costs nothing.
+    #[test]
+    fn path_prior_is_scale_free_and_zero_on_uniform_motion() {
+        let poses = path_poses(6);
+        let present = vec![true; 6];
+        let prior = PathPrior {
+            order: (0..6).collect(),
+            centre_sigma: 0.2,
+            rotation_sigma: 0.01,
+        };
+        let cost = prior.cost(&poses, &present);
+        assert!(cost > 1e-3);
+        let scaled: Vec<Se3> = poses
+            .iter()
+            .map(|p| Se3::new(p.rot, p.trans * 7.5))
+            .collect();
+        assert!((prior.cost(&scaled, &present) - cost).abs() < 1e-9 * cost);
+        let step = Rotation3::new(Vector3::new(0.01, -0.03, 0.02));
+        let uniform: Vec<Se3> = (0..6)
+            .map(|i| {
+                let r = step.powf(i as f64);
+                Se3::new(
+                    r.into_inner(),
+                    -(r * Vector3::new(0.3 * i as f64, 0.1, 0.0)),
+                )
+            })
+            .collect();
+        assert!(prior.cost(&uniform, &present) < 1e-20);
+        // A camera missing from the adjustment splits the path: no triple spans it.
+        let mut gap = present.clone();
+        gap[2] = false;
+        assert_eq!(prior.triples(&gap).count(), 1);
+    }
+
+    /// Cameras moving evenly along a line; the middle one sees only two points, too few to
+    /// place it. From a start off the line the prior brings it back; the photos alone leave it
+    /// somewhere on the family of poses that see the two points where they are.
+    #[test]
+    fn path_prior_holds_a_camera_the_photos_barely_see_in_line() {
+        let k = Intrinsics {
+            fx: 200.0,
+            fy: 200.0,
+            cx: 100.0,
+            cy: 100.0,
+            width: 200,
+            height: 200,
+        };
+        let gt: Vec<Se3> = (0..5)
+            .map(|i| Se3::new(Matrix3::identity(), -Vector3::new(0.5 * i as f64, 0.0, 0.0)))
+            .collect();
+        let pts: Vec<Vector3<f64>> = (0..60)
+            .map(|i| {
+                let t = i as f64;
+                Vector3::new(-1.0 + 0.07 * t, (t * 0.37).sin(), 5.0 + (t * 0.71).cos())
+            })
+            .collect();
+        // Camera 2 sees two points: four equations for six unknowns.
+        let mut obs = Vec::new();
+        for (ci, p) in gt.iter().enumerate() {
+            for (pi, x) in pts.iter().enumerate() {
+                if ci == 2 && pi % 30 != 0 {
+                    continue;
+                }
+                obs.push(Observation {
+                    cam: ci,
+                    point: pi,
+                    xy: k.project(&p.act(x)),
+                });
+            }
+        }
+        let solve = |path: Option<&PathPrior>| {
+            let mut poses = gt.clone();
+            poses[2].trans += Vector3::new(0.0, 0.3, 0.0);
+            let mut fixed = vec![false; 5];
+            fixed[0] = true;
+            fixed[4] = true;
+            let (mut p, mut kk) = (pts.clone(), k);
+            bundle_adjust(
+                &mut poses,
+                &fixed,
+                &mut p,
+                &obs,
+                &mut kk,
+                &BaOptions {
+                    huber_px: 1.0,
+                    max_iters: 100,
+                    focal: Focal::Fixed,
+                    path,
+                },
+            );
+            (camera_center_from_w2c(&poses[2]) - camera_center_from_w2c(&gt[2])).norm()
+        };
+        let prior = PathPrior {
+            order: (0..5).collect(),
+            centre_sigma: 0.1,
+            rotation_sigma: 0.01,
+        };
+        let (free, held) = (solve(None), solve(Some(&prior)));
+        assert!(
+            held < 1e-4,
+            "with the prior the camera returns to the line: {held}"
+        );
+        assert!(free > 1e-2, "two points alone do not place it: {free}");
     }
 
     /// Central finite differences of the residual against the analytic Jacobian.

@@ -28,6 +28,8 @@ pub(crate) struct Recon {
     pub k: Intrinsics,
     pub poses: Vec<Option<Se3>>,
     pub tracks: Vec<Track>,
+    /// Smooth motion in capture order, in every bundle adjustment, when the images are ordered.
+    pub path: Option<ba::PathPrior>,
 }
 
 impl Recon {
@@ -228,6 +230,7 @@ fn run_ba(r: &mut Recon, fixed_view: usize, focal: Focal, iters: usize, opts: &S
         .map(|p| p.unwrap_or(Se3::identity()))
         .collect();
     let fixed: Vec<bool> = (0..poses.len()).map(|v| v == fixed_view).collect();
+    let path = r.path.clone();
     ba::bundle_adjust(
         &mut poses,
         &fixed,
@@ -238,6 +241,7 @@ fn run_ba(r: &mut Recon, fixed_view: usize, focal: Focal, iters: usize, opts: &S
             huber_px: opts.max_reproj_px * 0.5,
             max_iters: iters,
             focal,
+            path: path.as_ref(),
         },
     );
     for (v, p) in r.poses.iter_mut().enumerate() {
@@ -353,6 +357,7 @@ pub(crate) fn reconstruct(
     pairs: &[PairCorr],
     nviews: usize,
     k: Intrinsics,
+    path: Option<&ba::PathPrior>,
     opts: &SfmOptions,
 ) -> Option<Recon> {
     let (i0, j0, rel) = initial_pair(pairs, &k, opts)?;
@@ -360,6 +365,7 @@ pub(crate) fn reconstruct(
         k,
         poses: vec![None; nviews],
         tracks,
+        path: path.cloned(),
     };
     r.poses[i0] = Some(Se3::identity());
     r.poses[j0] = Some(rel);

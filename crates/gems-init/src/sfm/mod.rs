@@ -91,8 +91,32 @@ pub struct SfmOptions {
     /// Tracking query points per view: its keypoints, then (only when they are fewer than a
     /// third of this) grid points, up to this many (the cost of tracking grows with it).
     pub max_query_points: usize,
+    /// Whether consecutive images (in the order given: the file names' order for a folder,
+    /// capture order for video frames) are consecutive captures. Ordered images get a weak
+    /// smoothness prior on the camera path in every bundle adjustment ([`ba::PathPrior`]).
+    pub capture_order: CaptureOrder,
+    /// The path prior's σ for the centres' second difference, as a fraction of the mean
+    /// distance between consecutive cameras; 0 leaves centres out.
+    pub path_centre_sigma: f64,
+    /// The path prior's σ for the change of the rotation step between captures, degrees; 0
+    /// leaves rotations out.
+    pub path_rotation_sigma_deg: f64,
     /// Seed of every random choice (RANSAC); same seed, same result.
     pub seed: u64,
+}
+
+/// Whether the images' order is their capture order; see [`SfmOptions::capture_order`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CaptureOrder {
+    /// Measured from the matches ([`detect_capture_order`]): ordered when almost every image
+    /// and the next share more matches than either does with most other images.
+    #[default]
+    Detect,
+    /// Known to be ordered (frames of a video).
+    Ordered,
+    /// No order: the path prior is off.
+    Unordered,
 }
 
 impl Default for SfmOptions {
@@ -114,6 +138,9 @@ impl Default for SfmOptions {
             grid_spacing_frac: 0.04,
             track_neighbours: 8,
             max_query_points: 300,
+            capture_order: CaptureOrder::Detect,
+            path_centre_sigma: 0.25,
+            path_rotation_sigma_deg: 0.5,
             seed: 0,
         }
     }
@@ -373,6 +400,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         let scale = features::exact_scale(w, ws as f64 / long);
         let work: Vec<Gray> = grays.par_iter().map(|g| g.resized(scale as f32)).collect();
         let (feats, pairs) = features_and_matches(&work, opts);
+        let path = path_prior(&pairs, images.len(), opts);
         let (tracks, corrs) = all_tracks(&work, &feats, &pairs, opts);
         t_feat += tf.elapsed().as_secs_f64();
         if textureless.is_none() {
@@ -398,7 +426,14 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
                 width: work[0].w as u32,
                 height: work[0].h as u32,
             };
-            let rec = incremental::reconstruct(tracks.clone(), &corrs, images.len(), k, opts);
+            let rec = incremental::reconstruct(
+                tracks.clone(),
+                &corrs,
+                images.len(),
+                k,
+                path.as_ref(),
+                opts,
+            );
             let Some(rec) = rec else { continue };
             let attempt = Attempt {
                 error_px: rec.mean_error() / scale,
@@ -725,6 +760,61 @@ fn feature_params(opts: &SfmOptions) -> FeatureParams {
 
 fn extract_one(g: &Gray, scale: f32, opts: &SfmOptions) -> Features {
     features::extract(&g.resized(scale), &feature_params(opts))
+}
+
+/// The smoothness prior on the camera path when the images are in capture order (given, or
+/// detected from the matches), `None` otherwise or when both of its σ are 0.
+fn path_prior(pairs: &[PairMatches], n: usize, opts: &SfmOptions) -> Option<ba::PathPrior> {
+    let ordered = match opts.capture_order {
+        CaptureOrder::Ordered => true,
+        CaptureOrder::Unordered => false,
+        CaptureOrder::Detect => {
+            let (neighbours, consecutive) = consecutive_best_partners(pairs, n);
+            let ordered = detect_capture_order(neighbours, consecutive);
+            tracing::info!(
+                ordered,
+                "capture order: {neighbours} of {consecutive} consecutive images are each other's best-matching partners"
+            );
+            ordered
+        }
+    };
+    let prior = ba::PathPrior {
+        order: (0..n).collect(),
+        centre_sigma: opts.path_centre_sigma,
+        rotation_sigma: opts.path_rotation_sigma_deg.to_radians(),
+    };
+    (ordered && n >= 3 && (prior.centre_sigma > 0.0 || prior.rotation_sigma > 0.0)).then_some(prior)
+}
+
+/// How many consecutive images (i, i + 1) are among each other's best-matching partners: i + 1
+/// one of the two images sharing most verified matches with i, or i one of i + 1's two; and
+/// how many consecutive pairs there are.
+fn consecutive_best_partners(pairs: &[PairMatches], n: usize) -> (usize, usize) {
+    let mut partners: Vec<Vec<(usize, usize)>> = vec![Vec::new(); n];
+    for p in pairs {
+        partners[p.i].push((p.matches.len(), p.j));
+        partners[p.j].push((p.matches.len(), p.i));
+    }
+    let best: Vec<Vec<usize>> = partners
+        .into_iter()
+        .map(|mut v| {
+            // Most matches first; ties by index, so the result does not depend on pair order.
+            v.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+            v.into_iter().take(2).map(|(_, j)| j).collect()
+        })
+        .collect();
+    let neighbours = (0..n.saturating_sub(1))
+        .filter(|&i| best[i].contains(&(i + 1)) || best[i + 1].contains(&i))
+        .count();
+    (neighbours, n.saturating_sub(1))
+}
+
+/// Images are taken as ordered when at least 80 % of consecutive pairs are best partners
+/// ([`consecutive_best_partners`]). In a shuffled set an image's next is one of its two best
+/// partners by chance with probability about 4/(n − 1), so the rule holds by chance only for
+/// the smallest sets; and there the prior is weak next to the photos.
+pub fn detect_capture_order(neighbours: usize, consecutive: usize) -> bool {
+    consecutive >= 2 && neighbours * 5 >= consecutive * 4
 }
 
 /// Features of every view (working level) and fundamental-matrix-verified descriptor matches of
