@@ -2,7 +2,7 @@
 
 mod common;
 
-use gems_init::sfm::{SfmError, SfmImage, SfmOptions, run_sfm, write_outputs};
+use gems_init::sfm::{CaptureOrder, SfmError, SfmImage, SfmOptions, run_sfm, write_outputs};
 
 /// A `gems synth --blur-levels` scene (16 views, 240×160, the full 11-frame burst blurs by 30 px
 /// = 12.5 % of the width, so level 7 carries ≈ 18 px), generated once per test binary.
@@ -64,6 +64,34 @@ fn check_level(level: usize, tol: f64, focal_from_metadata: bool) {
     );
     assert!(r.stats.points >= 100);
     assert!(r.stats.mean_reprojection_error < 2.0);
+}
+
+/// Asked to detect it, the SfM takes photos along an arc in file order as a capture order
+/// (and holds their path smooth), and the same photos shuffled not (the path prior would pull
+/// unrelated cameras together); both register every view.
+#[test]
+fn capture_order_is_detected_and_shuffled_photos_are_not_taken_as_one() {
+    let ld = synth_levels().join("s/blur_03");
+    let images = gems_init::sfm::load_images(&ld).unwrap();
+    let opts = SfmOptions {
+        capture_order: CaptureOrder::Detect,
+        ..SfmOptions::default()
+    };
+    let n = images.len();
+    let r = run_sfm(&images, &opts).expect("sfm");
+    assert!(
+        r.stats.capture_order,
+        "the views follow the arc in file order"
+    );
+    assert_eq!(r.stats.registered, n);
+    // A fixed permutation that keeps no two consecutive views next to each other.
+    let shuffled: Vec<SfmImage> = (0..n).map(|i| images[(i * 7) % n].clone()).collect();
+    assert_ne!(n % 7, 0, "a permutation");
+    let r = run_sfm(&shuffled, &opts).expect("sfm");
+    assert!(!r.stats.capture_order);
+    assert_eq!(r.stats.registered, n);
+    let default = run_sfm(&images, &SfmOptions::default()).expect("sfm");
+    assert!(!default.stats.capture_order, "off unless asked for");
 }
 
 #[test]

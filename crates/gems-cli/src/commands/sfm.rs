@@ -1,8 +1,19 @@
 //! `gems sfm`: blur-robust structure from motion on a scene's images (gems-init does the work).
 
 use anyhow::Context;
-use gems_init::sfm::{self, ColmapCliOptions, SfmOptions};
+use gems_init::sfm::{self, CaptureOrder, ColmapCliOptions, SfmOptions};
 use std::path::PathBuf;
+
+/// `gems sfm --capture-order`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum CaptureOrderArg {
+    /// Decide from the images.
+    Detect,
+    /// The images are in capture order.
+    Ordered,
+    /// No order.
+    Unordered,
+}
 
 /// Arguments of `gems sfm`.
 #[derive(clap::Args)]
@@ -39,6 +50,13 @@ pub struct Args {
     /// side (default: 0.04; 0 tracks keypoints only).
     #[arg(long)]
     pub grid_spacing: Option<f32>,
+    /// Whether the images' order (file names, or a video's frames) is their capture order. In
+    /// capture order the bundle adjustment holds the camera path smooth (a weak, robust prior
+    /// on consecutive cameras). `detect` decides from the images: ordered when almost every
+    /// image looks most like the next. Off by default: on generated scenes it did not help on
+    /// average (crates/gems-init/BENCHMARKS.md).
+    #[arg(long, value_enum, default_value_t = CaptureOrderArg::Unordered)]
+    pub capture_order: CaptureOrderArg,
     /// RANSAC seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -92,6 +110,11 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     let mut opts = SfmOptions {
         focal_px: focal,
         focal_prior: args.focal_prior,
+        capture_order: match args.capture_order {
+            CaptureOrderArg::Detect => CaptureOrder::Detect,
+            CaptureOrderArg::Ordered => CaptureOrder::Ordered,
+            CaptureOrderArg::Unordered => CaptureOrder::Unordered,
+        },
         seed: args.seed,
         ..SfmOptions::default()
     };
@@ -112,7 +135,7 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     sfm::write_outputs(&result, &args.output)?;
     let s = &result.stats;
     println!(
-        "registered {}/{} views, {} points, mean track length {:.2}, reprojection error {:.2} px, focal {:.1} px, estimated blur {:.0} px (working size {}), {:.1} s",
+        "registered {}/{} views, {} points, mean track length {:.2}, reprojection error {:.2} px, focal {:.1} px, estimated blur {:.0} px (working size {}), {}, {:.1} s",
         s.registered,
         s.total,
         s.points,
@@ -121,6 +144,11 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
         s.focal,
         s.blur_px_estimate,
         s.working_size,
+        if s.capture_order {
+            "in capture order (smooth path prior)"
+        } else {
+            "no capture order"
+        },
         s.seconds
     );
     println!("photo                        registered  blur px  points  error px");

@@ -126,6 +126,7 @@ pub(crate) fn assemble(
         seconds_features: 0.0,
         seconds_reconstruction: 0.0,
         blur_px_estimate: 0.0,
+        capture_order: false,
         views: views
             .iter()
             .zip(&per_view)
