@@ -5,6 +5,7 @@
 //!        [--working-sizes 192,128] [--grid SPACING_FRAC] [--neighbours N]
 //!        [--max-reproj PX] [--focal F] [--focal-prior REL]
 //!        [--order detect|ordered|unordered] [--path-centre SIGMA] [--path-rot DEG]
+//!        [--refine-max-blur PX]
 //! With `--levels-dir`, the scene is an existing folder with `images/` and `poses_bounds.npy`
 //! (e.g. a `blur_09` level of `gems synth --blur-levels`, or a Deblur-NeRF real scene, whose
 //! poses file is its COLMAP model's) instead of a generated one. `--focal` gives the SfM that
@@ -36,6 +37,7 @@ fn main() {
     let mut order: Option<CaptureOrder> = None;
     let mut path_centre: Option<f64> = None;
     let mut path_rot: Option<f64> = None;
+    let mut refine: Option<f64> = None;
     let mut it = args[1..].iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -67,6 +69,7 @@ fn main() {
             }
             "--path-centre" => path_centre = Some(it.next().unwrap().parse().unwrap()),
             "--path-rot" => path_rot = Some(it.next().unwrap().parse().unwrap()),
+            "--refine-max-blur" => refine = Some(it.next().unwrap().parse().unwrap()),
             s => panic!("unknown argument {s}"),
         }
     }
@@ -97,6 +100,9 @@ fn main() {
     }
     if let Some(n) = neighbours {
         opts.track_neighbours = n;
+    }
+    if let Some(b) = refine {
+        opts.refine_max_blur_px = b;
     }
     if let Some(o) = order {
         opts.capture_order = o;
@@ -190,7 +196,7 @@ fn main() {
         angle(last.1 * first.1.transpose()).to_degrees()
     );
     println!(
-        "{}: registered {}/{}, points {}, rmse/extent {:.4} (rmse {:.4}, extent {:.3}), rel. rot err {:.2}°, focal {:.1} (gt {:.1}, err {:+.1} %), reproj {:.2}px, {:.1}s (features {:.1}s), blur est {:.1}px, working size {}, unregistered {:?}",
+        "{}: registered {}/{}, points {}, rmse/extent {:.4} (rmse {:.4}, extent {:.3}), rel. rot err {:.2}°, focal {:.1} (gt {:.1}, err {:+.1} %), reproj {:.2}px, {:.1}s (features {:.1}s), blur est {:.1}px, working size {} (final {}), unregistered {:?}",
         dir.display(),
         r.stats.registered,
         r.stats.total,
@@ -207,6 +213,7 @@ fn main() {
         r.stats.seconds_features,
         r.stats.blur_px_estimate,
         r.stats.working_size,
+        r.stats.final_size,
         r.stats.unregistered
     );
 }

@@ -66,6 +66,48 @@ fn check_level(level: usize, tol: f64, focal_from_metadata: bool) {
     assert!(r.stats.mean_reprojection_error < 2.0);
 }
 
+/// Coarse-to-fine: the level-7 model (made at a coarse working level, where its 18 px of blur
+/// is short) re-measured up to the photos' own size stays accurate, every view registered;
+/// the default stops where the blur passes 12 px.
+#[test]
+fn coarse_to_fine_refinement_reaches_the_photos_size() {
+    let ld = synth_levels().join("s/blur_07");
+    let rows = gems_data::llff::read_poses_bounds(&ld.join("poses_bounds.npy")).unwrap();
+    let gt: Vec<gems_math::Se3> = rows.iter().map(|r| r.pose().into()).collect();
+    let images = gems_init::sfm::load_images(&ld).unwrap();
+    let run = |refine_max_blur_px| {
+        run_sfm(
+            &images,
+            &SfmOptions {
+                focal_px: Some(rows[0].focal()),
+                refine_max_blur_px,
+                ..SfmOptions::default()
+            },
+        )
+        .expect("sfm")
+    };
+    let (coarse, fine) = (run(0.0), run(f64::INFINITY));
+    assert_eq!(coarse.stats.final_size, coarse.stats.working_size);
+    assert!(coarse.stats.working_size < 240);
+    assert_eq!(fine.stats.working_size, coarse.stats.working_size);
+    assert_eq!(fine.stats.final_size, 240, "the photos' own size");
+    assert_eq!(fine.stats.registered, images.len());
+    let err = |r: &gems_init::sfm::SfmResult| {
+        let poses: Vec<_> = r.views.iter().map(|v| v.pose).collect();
+        common::aligned_rmse_fraction(&poses, &gt)
+    };
+    let (e0, e1) = (err(&coarse), err(&fine));
+    eprintln!("coarse {e0:.4}, refined {e1:.4}");
+    assert!(e1 < 0.025, "refined {e1} (coarse {e0})");
+    assert!(fine.stats.mean_reprojection_error < 2.0);
+    let default = run(SfmOptions::default().refine_max_blur_px);
+    let blur_there = default.stats.blur_px_estimate * f64::from(default.stats.final_size) / 240.0;
+    assert!(
+        blur_there <= 16.0 + 1.0,
+        "{blur_there} px of blur at the final level"
+    );
+}
+
 /// Asked to detect it, the SfM takes photos along an arc in file order as a capture order
 /// (and holds their path smooth), and the same photos shuffled not (the path prior would pull
 /// unrelated cameras together); both register every view.

@@ -135,7 +135,7 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     sfm::write_outputs(&result, &args.output)?;
     let s = &result.stats;
     println!(
-        "registered {}/{} views, {} points, mean track length {:.2}, reprojection error {:.2} px, focal {:.1} px, estimated blur {:.0} px (working size {}), {}, {:.1} s",
+        "registered {}/{} views, {} points, mean track length {:.2}, reprojection error {:.2} px, focal {:.1} px, estimated blur {:.0} px (working size {}, refined at {}), {}, {:.1} s",
         s.registered,
         s.total,
         s.points,
@@ -144,6 +144,7 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
         s.focal,
         s.blur_px_estimate,
         s.working_size,
+        s.final_size,
         if s.capture_order {
             "in capture order (smooth path prior)"
         } else {

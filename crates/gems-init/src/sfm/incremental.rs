@@ -203,7 +203,13 @@ fn triangulate_track(
 }
 
 /// Bundle-adjust all points and registered poses (the `fixed` view is the gauge).
-fn run_ba(r: &mut Recon, fixed_view: usize, focal: Focal, iters: usize, opts: &SfmOptions) {
+pub(crate) fn run_ba(
+    r: &mut Recon,
+    fixed_view: usize,
+    focal: Focal,
+    iters: usize,
+    opts: &SfmOptions,
+) {
     let mut point_of_track = vec![usize::MAX; r.tracks.len()];
     let mut points = Vec::new();
     let mut obs = Vec::new();
@@ -257,7 +263,7 @@ fn run_ba(r: &mut Recon, fixed_view: usize, focal: Focal, iters: usize, opts: &S
 }
 
 /// Deactivate observations beyond the reprojection threshold; drop points left with < 2.
-fn filter_outliers(r: &mut Recon, opts: &SfmOptions) {
+pub(crate) fn filter_outliers(r: &mut Recon, opts: &SfmOptions) {
     let k = r.k;
     for t in &mut r.tracks {
         let Some(x) = t.xyz else { continue };

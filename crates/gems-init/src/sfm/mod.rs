@@ -36,6 +36,7 @@ pub mod features;
 pub mod geometry;
 mod incremental;
 mod output;
+mod refine;
 mod tracking;
 
 pub use colmap_cli::{ColmapCliOptions, run_colmap_cli};
@@ -105,6 +106,12 @@ pub struct SfmOptions {
     /// The path prior's σ for the change of the rotation step between captures, degrees; 0
     /// leaves rotations out.
     pub path_rotation_sigma_deg: f64,
+    /// Coarse-to-fine: the model made at the working level is re-measured and bundle-adjusted
+    /// at the finest level where the estimated blur is at most this many pixels (the photos'
+    /// own size at most; steps of at most 2×, each kept only while every registered view stays
+    /// well observed). 0 turns it off. Much past 12 px the smear biases the re-measured points
+    /// more than the finer pixels help under heavy blur.
+    pub refine_max_blur_px: f64,
     /// Seed of every random choice (RANSAC); same seed, same result.
     pub seed: u64,
 }
@@ -145,6 +152,10 @@ impl Default for SfmOptions {
             capture_order: CaptureOrder::Unordered,
             path_centre_sigma: 0.25,
             path_rotation_sigma_deg: 0.5,
+            // 12 px: on 30 generated scenes centre errors 2.24 → 2.16 % and relative rotations
+            // 3.33 → 2.96° (16 px: 2.34 % and 2.92°, heavy blur worse); blurball 1.05 → 0.90 %
+            // (crates/gems-init/BENCHMARKS.md, "Coarse to fine").
+            refine_max_blur_px: 12.0,
             seed: 0,
         }
     }
@@ -258,6 +269,9 @@ pub struct SfmStats {
     pub unregistered: Vec<String>,
     /// Long side of the pyramid level the reconstruction was made at.
     pub working_size: u32,
+    /// Long side of the level it was last bundle-adjusted at: the working size, or finer after
+    /// [`SfmOptions::refine_steps`].
+    pub final_size: u32,
     pub focal: f64,
     pub focal_from_metadata: bool,
     /// Seconds spent in feature extraction + matching, and in reconstruction.
@@ -472,7 +486,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     let Some(Attempt {
         recon: mut rec,
         working_size: ws,
-        scale,
+        mut scale,
         ..
     }) = best
     else {
@@ -505,7 +519,36 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         }
         (Some(_), None) => {}
     }
+    // The finest scale whose blur stays within `refine_max_blur_px`; `blur` is in full-size px.
+    let finest = if opts.refine_max_blur_px <= 0.0 {
+        0.0
+    } else if blur > 0.0 {
+        opts.refine_max_blur_px / blur
+    } else {
+        1.0
+    };
+    loop {
+        let to = features::exact_scale(w, finest.min(2.0 * scale));
+        if to <= scale * 1.05 {
+            break;
+        }
+        match refine::refine_finer(&rec, &grays, scale, to, opts) {
+            Some(r) => {
+                tracing::info!(size = (long * to).round(), "model refined at a finer level");
+                rec = r;
+                scale = to;
+            }
+            None => {
+                tracing::info!(
+                    size = (long * to).round(),
+                    "a finer level left a view with too few observations; kept the coarser"
+                );
+                break;
+            }
+        }
+    }
     let mut result = output::assemble(images, &rec, scale, opts.focal_px.is_some(), ws);
+    result.stats.final_size = (long * scale).round() as u32;
     result.stats.seconds = t0.elapsed().as_secs_f64();
     result.stats.seconds_features = t_feat;
     result.stats.seconds_reconstruction = t_rec;

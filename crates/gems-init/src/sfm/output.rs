@@ -121,6 +121,7 @@ pub(crate) fn assemble(
         seconds: 0.0,
         unregistered,
         working_size,
+        final_size: working_size,
         focal: camera.focal,
         focal_from_metadata,
         seconds_features: 0.0,

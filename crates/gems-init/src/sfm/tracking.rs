@@ -468,19 +468,32 @@ pub(crate) fn track_points(
 ) -> Vec<Option<[f32; 2]>> {
     pts.par_iter()
         .map_init(Scratch::default, |s, &pt| {
-            if !template(&src.img, pt, p.half, &mut s.tmpl) {
-                return None;
-            }
-            let (q, _) = search(dst, [pt[0] + shift[0], pt[1] + shift[1]], p, p.radius, s)?;
-            if !template(&dst.img, q, p.half, &mut s.tmpl) {
-                return None;
-            }
-            let back_r = (p.fb_tol.ceil() as i32 + 2).max(3);
-            let (b, _) = search(src, pt, p, back_r, s)?;
-            let err = ((b[0] - pt[0]).powi(2) + (b[1] - pt[1]).powi(2)).sqrt();
-            (err <= p.fb_tol).then_some(q)
+            track_point(src, dst, pt, [pt[0] + shift[0], pt[1] + shift[1]], p, s)
         })
         .collect()
+}
+
+/// Track the point `pt` of `src` into `dst`, searching within `p.radius` of `predicted`. Returns
+/// its position in `dst` when the track back from there lands within `p.fb_tol` of `pt`.
+pub(crate) fn track_point(
+    src: &Prepared,
+    dst: &Prepared,
+    pt: [f32; 2],
+    predicted: [f32; 2],
+    p: &TrackParams,
+    s: &mut Scratch,
+) -> Option<[f32; 2]> {
+    if !template(&src.img, pt, p.half, &mut s.tmpl) {
+        return None;
+    }
+    let (q, _) = search(dst, predicted, p, p.radius, s)?;
+    if !template(&dst.img, q, p.half, &mut s.tmpl) {
+        return None;
+    }
+    let back_r = (p.fb_tol.ceil() as i32 + 2).max(3);
+    let (b, _) = search(src, pt, p, back_r, s)?;
+    let err = ((b[0] - pt[0]).powi(2) + (b[1] - pt[1]).powi(2)).sqrt();
+    (err <= p.fb_tol).then_some(q)
 }
 
 #[cfg(test)]
