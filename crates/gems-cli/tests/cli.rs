@@ -219,6 +219,21 @@ fn sfm_tracking_density_flags_reach_the_sfm() {
         "0",
     ]);
     fails_clearly(&bad, "focal_prior");
+
+    // Coarse to fine off keeps the working level's model; capture order on is reported.
+    let report = |extra: &[&str], name: &str| {
+        let out = dir.path().join(name);
+        ok(&gems(&[&["sfm", s(&scene), "-o", s(&out)], extra].concat()));
+        serde_json::from_slice::<serde_json::Value>(
+            &std::fs::read(out.join("sfm_report.json")).unwrap(),
+        )
+        .unwrap()
+    };
+    let coarse = report(&["--refine-max-blur", "0"], "coarse");
+    assert_eq!(coarse["final_size"], coarse["working_size"]);
+    assert_eq!(coarse["capture_order"], false);
+    let ordered = report(&["--capture-order", "ordered"], "ordered");
+    assert_eq!(ordered["capture_order"], true);
 }
 
 #[test]

@@ -57,6 +57,10 @@ pub struct Args {
     /// average (crates/gems-init/BENCHMARKS.md).
     #[arg(long, value_enum, default_value_t = CaptureOrderArg::Unordered)]
     pub capture_order: CaptureOrderArg,
+    /// Coarse to fine: re-measure the model at the finest level where the estimated blur is at
+    /// most this many pixels (default: 12; 0 keeps the working level's model).
+    #[arg(long)]
+    pub refine_max_blur: Option<f64>,
     /// RANSAC seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -129,6 +133,9 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     }
     if let Some(g) = args.grid_spacing {
         opts.grid_spacing_frac = g;
+    }
+    if let Some(b) = args.refine_max_blur {
+        opts.refine_max_blur_px = b;
     }
     tracing::info!(images = images.len(), "running structure from motion");
     let result = sfm::run_sfm(&images, &opts)?;
