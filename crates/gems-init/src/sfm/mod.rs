@@ -22,7 +22,10 @@
 //!    (a free focal drifts along its weak direction under blur). The one registering most views
 //!    wins; candidates whose mean errors are within 1 % of the best are ties (under blur the error
 //!    is nearly flat in the focal) decided by a 53° field-of-view prior; a final bundle
-//!    adjustment refines the focal inside the bracket of the neighbouring candidates.
+//!    adjustment refines the focal inside the bracket of the neighbouring candidates;
+//! 6. coarse to fine: the model is re-measured and bundle-adjusted at the finest level where the
+//!    estimated blur is at most [`SfmOptions::refine_max_blur_px`]; with
+//!    [`SfmOptions::capture_order`], every bundle adjustment also holds the camera path smooth.
 //!
 //! Every input view is either registered or listed in [`SfmStats::unregistered`]. Fewer than two
 //! registered views is an error ([`SfmError::TooFewRegistered`]), as are degenerate inputs.
@@ -270,7 +273,7 @@ pub struct SfmStats {
     /// Long side of the pyramid level the reconstruction was made at.
     pub working_size: u32,
     /// Long side of the level it was last bundle-adjusted at: the working size, or finer after
-    /// [`SfmOptions::refine_steps`].
+    /// [`SfmOptions::refine_max_blur_px`].
     pub final_size: u32,
     pub focal: f64,
     pub focal_from_metadata: bool,
