@@ -122,9 +122,9 @@ pub struct SfmOptions {
 /// Whether the images' order is their capture order; see [`SfmOptions::capture_order`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum CaptureOrder {
-    /// Measured from the views' thumbnails: ordered when, for at least 80 % of consecutive images, the
-    /// next is one of the two images sharing most verified matches with an image (or the other
-    /// way round).
+    /// Measured from the views' thumbnails: ordered when, for at least 80 % of consecutive
+    /// images, the next is one of the two whose thumbnails look most like an image's (or the
+    /// other way round).
     Detect,
     /// Known to be ordered (frames of a video).
     Ordered,
