@@ -5,7 +5,7 @@
 //!        [--working-sizes 192,128] [--grid SPACING_FRAC] [--neighbours N]
 //!        [--max-reproj PX] [--focal F] [--focal-prior REL]
 //!        [--order detect|ordered|unordered] [--path-centre SIGMA] [--path-rot DEG]
-//!        [--refine-max-blur PX]
+//!        [--refine-max-blur PX] [--refine-patch RATIO]
 //! With `--levels-dir`, the scene is an existing folder with `images/` and `poses_bounds.npy`
 //! (e.g. a `blur_09` level of `gems synth --blur-levels`, or a Deblur-NeRF real scene, whose
 //! poses file is its COLMAP model's) instead of a generated one. `--focal` gives the SfM that
@@ -38,6 +38,7 @@ fn main() {
     let mut path_centre: Option<f64> = None;
     let mut path_rot: Option<f64> = None;
     let mut refine: Option<f64> = None;
+    let mut refine_patch: Option<f64> = None;
     let mut it = args[1..].iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -70,6 +71,7 @@ fn main() {
             "--path-centre" => path_centre = Some(it.next().unwrap().parse().unwrap()),
             "--path-rot" => path_rot = Some(it.next().unwrap().parse().unwrap()),
             "--refine-max-blur" => refine = Some(it.next().unwrap().parse().unwrap()),
+            "--refine-patch" => refine_patch = Some(it.next().unwrap().parse().unwrap()),
             s => panic!("unknown argument {s}"),
         }
     }
@@ -103,6 +105,9 @@ fn main() {
     }
     if let Some(b) = refine {
         opts.refine_max_blur_px = b;
+    }
+    if let Some(r) = refine_patch {
+        opts.refine_patch_blur_ratio = r;
     }
     if let Some(o) = order {
         opts.capture_order = o;

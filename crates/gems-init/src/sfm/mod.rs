@@ -24,7 +24,9 @@
 //!    is nearly flat in the focal) decided by a 53° field-of-view prior; a final bundle
 //!    adjustment refines the focal inside the bracket of the neighbouring candidates;
 //! 6. coarse to fine: the model is re-measured and bundle-adjusted at the finest level where the
-//!    estimated blur is at most [`SfmOptions::refine_max_blur_px`]; with
+//!    estimated blur is at most [`SfmOptions::refine_max_blur_px`], then once more there; each
+//!    template is warped into the other view by the model's local surface map, with patches
+//!    sized to the blur ([`SfmOptions::refine_patch_blur_ratio`]); with
 //!    [`SfmOptions::capture_order`], every bundle adjustment also holds the camera path smooth.
 //!
 //! Every input view is either registered or listed in [`SfmStats::unregistered`]. Fewer than two
@@ -115,6 +117,13 @@ pub struct SfmOptions {
     /// well observed). 0 turns it off. Much past 12 px the smear biases the re-measured points
     /// more than the finer pixels help under heavy blur.
     pub refine_max_blur_px: f64,
+    /// Half-size of the tracking patch where the model is re-measured, as a multiple of the
+    /// estimated blur at that level (4–10 px). A patch needs about the smear's extent to stay
+    /// distinctive, and a smaller one is less biased by foreshortening and by depth edges, so
+    /// nearly sharp photos are re-measured with small patches. 0 keeps the working level's
+    /// size (9 % of the long side). Default 0.75 (crates/gems-init/BENCHMARKS.md, "Warped,
+    /// blur-sized patches").
+    pub refine_patch_blur_ratio: f64,
     /// Seed of every random choice (RANSAC); same seed, same result.
     pub seed: u64,
 }
@@ -159,6 +168,7 @@ impl Default for SfmOptions {
             // 3.33 → 2.96° (16 px: 2.34 % and 2.92°, heavy blur worse); blurball 1.05 → 0.90 %
             // (crates/gems-init/BENCHMARKS.md, "Coarse to fine").
             refine_max_blur_px: 12.0,
+            refine_patch_blur_ratio: 0.75,
             seed: 0,
         }
     }
@@ -535,7 +545,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         if to <= scale * 1.05 {
             break;
         }
-        match refine::refine_finer(&rec, &grays, scale, to, opts) {
+        match refine::remeasure(&rec, &grays, scale, to, blur, opts) {
             Some(r) => {
                 tracing::info!(size = (long * to).round(), "model refined at a finer level");
                 rec = r;
@@ -548,6 +558,13 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
                 );
                 break;
             }
+        }
+    }
+    if opts.refine_max_blur_px > 0.0 {
+        // Once more at the final level, with the patch warps of the final model.
+        match refine::remeasure(&rec, &grays, scale, scale, blur, opts) {
+            Some(r) => rec = r,
+            None => tracing::info!("re-measuring left a view with too few observations; kept"),
         }
     }
     let mut result = output::assemble(images, &rec, scale, opts.focal_px.is_some(), ws);

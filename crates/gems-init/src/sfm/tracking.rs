@@ -116,12 +116,36 @@ fn best_shift(a: &Gray, b: &Gray) -> (f32, i32, i32) {
     best
 }
 
-/// Normalised template of `src` around the sub-pixel point `p`; false when flat.
-fn template(src: &Gray, p: [f32; 2], half: i32, out: &mut Vec<f32>) -> bool {
+/// A local affine map between two views' pixel offsets around corresponding points, row-major:
+/// offset d in one view ↦ `[m[0][0]·d.x + m[0][1]·d.y, m[1][0]·d.x + m[1][1]·d.y]` in the other.
+pub(crate) type Warp = [[f32; 2]; 2];
+
+/// Offsets map to themselves: the two views see the patch alike.
+pub(crate) const IDENTITY: Warp = [[1.0, 0.0], [0.0, 1.0]];
+
+/// The inverse of `m`, or `None` when it is (nearly) singular or flips orientation.
+pub(crate) fn invert(m: &Warp) -> Option<Warp> {
+    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+    (det > 1e-3).then(|| {
+        [
+            [m[1][1] / det, -m[0][1] / det],
+            [-m[1][0] / det, m[0][0] / det],
+        ]
+    })
+}
+
+/// Normalised template of `src` around the sub-pixel point `p`, sampled at `p + m·d` for the
+/// patch's integer offsets d (so it looks as the patch does in a view where `m` maps that view's
+/// offsets into `src`'s); false when flat.
+fn template(src: &Gray, p: [f32; 2], m: &Warp, half: i32, out: &mut Vec<f32>) -> bool {
     out.clear();
     for dy in -half..=half {
         for dx in -half..=half {
-            out.push(src.sample(p[0] + dx as f32, p[1] + dy as f32));
+            let (dx, dy) = (dx as f32, dy as f32);
+            out.push(src.sample(
+                p[0] + m[0][0] * dx + m[0][1] * dy,
+                p[1] + m[1][0] * dx + m[1][1] * dy,
+            ));
         }
     }
     normalise(out)
@@ -468,26 +492,35 @@ pub(crate) fn track_points(
 ) -> Vec<Option<[f32; 2]>> {
     pts.par_iter()
         .map_init(Scratch::default, |s, &pt| {
-            track_point(src, dst, pt, [pt[0] + shift[0], pt[1] + shift[1]], p, s)
+            let predicted = [pt[0] + shift[0], pt[1] + shift[1]];
+            track_point(src, dst, pt, predicted, &IDENTITY, p, s)
         })
         .collect()
 }
 
 /// Track the point `pt` of `src` into `dst`, searching within `p.radius` of `predicted`. Returns
 /// its position in `dst` when the track back from there lands within `p.fb_tol` of `pt`.
+///
+/// `warp` maps pixel offsets around `pt` in `src` to offsets in `dst` (the local affine map of the
+/// surface between the two views, when a model predicts it; [`IDENTITY`] otherwise). Each
+/// template is resampled through it, so a patch seen obliquely, rotated or at another scale in
+/// the other view is compared in that view's geometry: a translation-only match of a foreshortened
+/// patch is biased, and across a wide baseline that bias is systematic.
 pub(crate) fn track_point(
     src: &Prepared,
     dst: &Prepared,
     pt: [f32; 2],
     predicted: [f32; 2],
+    warp: &Warp,
     p: &TrackParams,
     s: &mut Scratch,
 ) -> Option<[f32; 2]> {
-    if !template(&src.img, pt, p.half, &mut s.tmpl) {
+    let inverse = invert(warp)?;
+    if !template(&src.img, pt, &inverse, p.half, &mut s.tmpl) {
         return None;
     }
     let (q, _) = search(dst, predicted, p, p.radius, s)?;
-    if !template(&dst.img, q, p.half, &mut s.tmpl) {
+    if !template(&dst.img, q, warp, p.half, &mut s.tmpl) {
         return None;
     }
     let back_r = (p.fb_tol.ceil() as i32 + 2).max(3);
@@ -534,6 +567,82 @@ mod tests {
                 "{pt:?} → {q:?}"
             );
         }
+    }
+
+    #[test]
+    fn invert_undoes_a_warp_and_refuses_a_flip() {
+        let m: Warp = [[0.8, 0.3], [-0.2, 1.4]];
+        let inv = invert(&m).expect("invertible");
+        for (i, row) in m.iter().enumerate() {
+            for (j, (a, b)) in inv[0].iter().zip(&inv[1]).enumerate() {
+                let v = row[0] * a + row[1] * b;
+                assert!((v - f32::from(u8::from(i == j))).abs() < 1e-6);
+            }
+        }
+        assert!(invert(&[[0.0, 1.0], [1.0, 0.0]]).is_none());
+        assert!(invert(&[[1.0, 2.0], [0.5, 1.0]]).is_none());
+    }
+
+    /// A patch seen obliquely in the other view (an affine map of its offsets) is found where
+    /// the map puts it when the template goes through that map, and with a bias without it.
+    #[test]
+    fn a_warped_template_removes_the_foreshortening_bias() {
+        let texture = |u: f32, v: f32| {
+            (0.23 * u).sin() * (0.19 * v).cos()
+                + 0.6 * (0.07 * u - 0.13 * v).sin()
+                + 0.4 * (0.011 * u * v + 0.3).sin()
+        };
+        let a: Warp = [[0.72, 0.22], [-0.05, 1.18]];
+        let inv = invert(&a).unwrap();
+        let (w, h) = (140, 120);
+        let (cs, cd) = ([70.0f32, 60.0], [72.3f32, 58.6]);
+        let image = |f: &dyn Fn(f32, f32) -> f32| Gray {
+            w,
+            h,
+            data: (0..w * h)
+                .map(|i| f((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
+                .collect(),
+        };
+        let src = Prepared::new(image(&texture).gaussian(1.0));
+        let dst = Prepared::new(
+            image(&|x, y| {
+                let (ex, ey) = (x - cd[0], y - cd[1]);
+                texture(
+                    cs[0] + inv[0][0] * ex + inv[0][1] * ey,
+                    cs[1] + inv[1][0] * ex + inv[1][1] * ey,
+                )
+            })
+            .gaussian(1.0),
+        );
+        let p = TrackParams {
+            half: 8,
+            radius: 6,
+            neighbours: 1,
+            min_ncc: 0.5,
+            min_margin: 0.0,
+            fb_tol: 3.0,
+        };
+        let mut s = Scratch::default();
+        let (mut warped, mut plain) = (Vec::new(), Vec::new());
+        for e in [[0.0f32, 0.0], [-14.3, 9.1], [11.7, -12.4], [16.2, 14.8]] {
+            let pt = [cs[0] + e[0], cs[1] + e[1]];
+            let truth = [
+                cd[0] + a[0][0] * e[0] + a[0][1] * e[1],
+                cd[1] + a[1][0] * e[0] + a[1][1] * e[1],
+            ];
+            let err = |q: [f32; 2]| (q[0] - truth[0]).hypot(q[1] - truth[1]);
+            let q = track_point(&src, &dst, pt, truth, &a, &p, &mut s).expect("tracked");
+            warped.push(err(q));
+            if let Some(q) = track_point(&src, &dst, pt, truth, &IDENTITY, &p, &mut s) {
+                plain.push(err(q));
+            }
+        }
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len().max(1) as f32;
+        assert!(warped.iter().all(|&e| e < 0.1), "{warped:?}");
+        assert!(
+            plain.len() < warped.len() || mean(&plain) > 3.0 * mean(&warped),
+            "warped {warped:?}, plain {plain:?}"
+        );
     }
 
     #[test]
