@@ -215,8 +215,7 @@ fn sfm_tracking_density_flags_reach_the_sfm() {
         s(&scene),
         "-o",
         s(&dir.path().join("bad-prior")),
-        "--focal-prior",
-        "0",
+        "--focal-prior=-0.1",
     ]);
     fails_clearly(&bad, "focal_prior");
 
@@ -670,6 +669,26 @@ fn exif_focal_is_used_and_reported() {
     );
     let report: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("sfm/sfm_report.json")).unwrap(),
+    )
+    .unwrap();
+    // Refined under the EXIF prior (2 %): moved, but not far.
+    let refined = report["focal"].as_f64().unwrap();
+    assert!(
+        refined != 80.0 && (refined / 80.0 - 1.0).abs() < 0.1,
+        "{report}"
+    );
+    // --focal-prior 0 holds it.
+    let out = gems(&[
+        "sfm",
+        s(&photos),
+        "-o",
+        s(&dir.path().join("sfm-held")),
+        "--focal-prior",
+        "0",
+    ]);
+    ok(&out);
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("sfm-held/sfm_report.json")).unwrap(),
     )
     .unwrap();
     assert_eq!(report["focal"].as_f64(), Some(80.0), "{report}");

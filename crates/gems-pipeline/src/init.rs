@@ -54,6 +54,10 @@ pub struct InitRequest {
     /// Focal length in pixels at full image size for the SfM or COLMAP (calibrated camera);
     /// `None` lets them estimate it.
     pub focal_px: Option<f64>,
+    /// With `focal_px`: how well it is known (σ as a fraction of it), so that the built-in SfM
+    /// refines it under that prior ([`gems_init::sfm::SfmOptions::focal_prior`]); `None` holds
+    /// it. [`crate::train_scene`] sets it for a focal read from EXIF.
+    pub focal_prior: Option<f64>,
     /// The COLMAP executable for [`Init::ColmapCli`].
     pub colmap_binary: PathBuf,
 }
@@ -69,6 +73,7 @@ impl InitRequest {
             noise_rotation: 0.01,
             events: None,
             focal_px: None,
+            focal_prior: None,
             colmap_binary: PathBuf::from("colmap"),
         }
     }
@@ -103,6 +108,7 @@ pub fn resolve_init(
             &output.join("sfm"),
             seed,
             req.focal_px,
+            req.focal_prior,
         )?)),
         Init::ColmapCli => InitMode::Colmap(Some(run_colmap(
             &init_images(scene, output, req)?,
@@ -206,7 +212,7 @@ pub fn rerun_init_on_renders(
     let model = match req.init {
         Init::ColmapCli => run_colmap(out, out, &req.colmap_binary, req.focal_px)?,
         Init::Sfm | Init::Colmap | Init::Gt | Init::GtNoisy => {
-            run_sfm(out, out, seed, req.focal_px)?
+            run_sfm(out, out, seed, req.focal_px, req.focal_prior)?
         }
     };
     if renamed.iter().any(|(written, name)| written != name) {
@@ -267,18 +273,21 @@ pub fn edi_images(scene: &Path, output: &Path, ev: &EventInit) -> Result<PathBuf
 }
 
 /// Runs the built-in SfM on `images` (a scene folder or an image folder), writes its outputs to
-/// `out` and returns the COLMAP model folder. `focal_px` fixes a known focal (calibrated camera).
+/// `out` and returns the COLMAP model folder. `focal_px` fixes a known focal (calibrated camera),
+/// or with `focal_prior` (σ over the focal) is refined under that prior (a focal from EXIF).
 /// Views it could not register are reported by name.
 pub fn run_sfm(
     images: &Path,
     out: &Path,
     seed: u64,
     focal_px: Option<f64>,
+    focal_prior: Option<f64>,
 ) -> Result<PathBuf, PipelineError> {
     let imgs = gems_init::sfm::load_images(images)?;
     let opts = gems_init::sfm::SfmOptions {
         seed,
         focal_px,
+        focal_prior,
         ..Default::default()
     };
     tracing::info!(images = imgs.len(), "structure from motion");

@@ -94,12 +94,14 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         });
     }
     let mut init = req.init;
-    init.focal_px = init.focal_px.or_else(|| {
-        gems_data::exif::scene_focal(&scene).map(|f| {
-            tracing::info!(focal_px = f.focal_px, source = %f.source, image = %f.image.display(), "focal for the SfM");
-            f.focal_px
-        })
-    });
+    if init.focal_px.is_none()
+        && let Some(f) = gems_data::exif::scene_focal(&scene)
+    {
+        tracing::info!(focal_px = f.focal_px, source = %f.source, image = %f.image.display(), "focal for the SfM");
+        init.focal_px = Some(f.focal_px);
+        let width = req.cfg.init.exif_focal_prior;
+        init.focal_prior = init.focal_prior.or((width > 0.0).then_some(width));
+    }
     let mut mode = resolve_init(&req.scene, &req.output, &init, req.cfg.seed, req.resume)?;
     let mut cfg = req.cfg;
     if init.init == Init::Gt {

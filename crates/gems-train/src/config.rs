@@ -235,6 +235,11 @@ pub struct InitConfig {
     /// `sfm_rerun_straight_fraction`.
     #[serde(alias = "sfm_rerun_straight_fraction")]
     pub accurate_poses_straight_fraction: f64,
+    /// σ, as a fraction of the focal, of the prior under which the built-in SfM refines a focal
+    /// read from the photos' EXIF (gems-pipeline; `gems_init::sfm::EXIF_FOCAL_PRIOR`, whose value
+    /// this default is). 0 holds the EXIF focal fixed. A focal given on the command line is
+    /// always held (a calibration).
+    pub exif_focal_prior: f64,
 }
 
 /// How a sparse SfM cloud is topped up to `min_points`.
@@ -262,6 +267,7 @@ impl Default for InitConfig {
             sfm_rerun_fraction: 1.0 / 3.0,
             sfm_rerun_min_steps: 1000,
             accurate_poses_straight_fraction: 0.15,
+            exif_focal_prior: 0.02,
         }
     }
 }
@@ -477,6 +483,9 @@ impl TrainConfig {
         }
         if !(0.0..1.0).contains(&self.init.sfm_rerun_fraction) {
             return Err("init.sfm_rerun_fraction must be in [0, 1)".into());
+        }
+        if !(self.init.exif_focal_prior.is_finite() && self.init.exif_focal_prior >= 0.0) {
+            return Err("init.exif_focal_prior must be finite and >= 0".into());
         }
         if !(0.0..=1.0).contains(&self.init.accurate_poses_straight_fraction) {
             return Err("init.accurate_poses_straight_fraction must be in [0, 1]".into());

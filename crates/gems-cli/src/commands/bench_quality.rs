@@ -211,8 +211,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .transpose()?;
         const SHARP_SFM: &str = "GeMS, built-in SfM on the sharp frames";
         let gems_sharp_sfm = wants(RowKind::SharpSfm)
-            .then(
-                || match gems_pipeline::run_sfm(&sharp, &dir.join("sharp_sfm"), seed, focal) {
+            .then(|| {
+                match gems_pipeline::run_sfm(&sharp, &dir.join("sharp_sfm"), seed, focal, None) {
                     Ok(model) => row(
                         SHARP_SFM,
                         gems_pipeline::InitRequest {
@@ -224,8 +224,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         &cfg,
                     ),
                     Err(e) => Ok(Row::failed(seed, SHARP_SFM, format!("SfM failed: {e:#}"))),
-                },
-            )
+                }
+            })
             .transpose()?;
         let gems_gt = wants(RowKind::Gt)
             .then(|| {

@@ -31,8 +31,8 @@ pub struct Args {
     #[arg(long)]
     pub focal: Option<f64>,
     /// Refine the given or EXIF focal in the final bundle adjustment under a Gaussian prior of
-    /// this relative width (e.g. 0.02) instead of holding it fixed. Off by default: under heavy
-    /// blur the photos pull the focal away from an exact one (crates/gems-init/BENCHMARKS.md).
+    /// this relative width instead of holding it fixed. Default: 0.02 for a focal read from EXIF
+    /// (`gems_init::sfm::EXIF_FOCAL_PRIOR`), held for one given with `--focal` (0 holds either).
     #[arg(long)]
     pub focal_prior: Option<f64>,
     /// Long side (px) of the pyramid levels to try (default: 384,256,192,128,96,64), nearest first to
@@ -76,6 +76,7 @@ pub struct Args {
 pub fn run(mut args: Args) -> anyhow::Result<()> {
     crate::console::log_to(&args.output)?;
     args.scene = args.video.scene(&args.scene, &args.output)?;
+    let from_exif = args.focal.is_none();
     let focal = args.focal.or_else(|| {
         gems_data::exif::folder_focal(&args.scene).map(|f| {
             println!(
@@ -113,7 +114,10 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     let images = sfm::load_images(&args.scene)?;
     let mut opts = SfmOptions {
         focal_px: focal,
-        focal_prior: args.focal_prior,
+        focal_prior: args
+            .focal_prior
+            .or((from_exif && focal.is_some()).then_some(sfm::EXIF_FOCAL_PRIOR))
+            .filter(|&w| w != 0.0),
         capture_order: match args.capture_order {
             CaptureOrderArg::Detect => CaptureOrder::Detect,
             CaptureOrderArg::Ordered => CaptureOrder::Ordered,

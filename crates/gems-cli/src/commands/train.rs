@@ -77,7 +77,8 @@ pub struct Args {
     #[arg(long)]
     pub events: bool,
     /// Focal length in pixels at full image size, for --init sfm / colmap-cli when the camera is
-    /// calibrated. Default: from the photos' EXIF when they carry it, else estimated by the SfM.
+    /// calibrated (held fixed). Default: from the photos' EXIF when they carry it (refined by the
+    /// built-in SfM under the prior `init.exif_focal_prior`), else estimated by the SfM.
     #[arg(long)]
     pub focal: Option<f64>,
     /// The COLMAP executable for --init colmap-cli.
@@ -176,6 +177,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             time_unit: args.time_unit,
         }),
         focal_px: args.focal,
+        // A focal from EXIF gets `init.exif_focal_prior` in `train_scene`; a given one is held.
+        focal_prior: None,
         colmap_binary: args.colmap_binary,
     };
     let run = gems_pipeline::train_scene(gems_pipeline::TrainRequest {

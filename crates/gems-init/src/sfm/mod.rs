@@ -64,6 +64,13 @@ pub struct SfmImage {
     pub image: image::RgbImage,
 }
 
+/// Relative width (σ over the focal) of the prior under which a focal read from the photos'
+/// metadata is refined: EXIF focal lengths are rounded and lens-dependent (blurball's is 4.9 %
+/// below its COLMAP model's), and with this prior the SfM brings it within 2 % there while it
+/// pulls an exact one by about 1 % on average (crates/gems-init/BENCHMARKS.md, "The focal prior
+/// after coarse to fine"). A calibration the user gives is held.
+pub const EXIF_FOCAL_PRIOR: f64 = 0.02;
+
 /// Settings of [`run_sfm`].
 #[derive(Clone, Debug)]
 pub struct SfmOptions {
@@ -509,28 +516,13 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
             unregistered: images.iter().map(|i| i.name.clone()).collect(),
         });
     };
-    match (opts.focal_px, opts.focal_prior) {
-        (None, _) => {
-            if let Some(r) = refine_focal_around(&rec, long * scale, opts) {
-                tracing::info!(focal = r.k.fx / scale, "focal refined");
-                rec = r;
-            }
-        }
-        (Some(f), Some(rel)) => {
-            let prior = ba::Focal::Prior {
-                focal: f * scale,
-                sigma: rel * f * scale,
-            };
-            if let Some(r) = incremental::refine_focal(&rec, prior, opts) {
-                tracing::info!(
-                    given = f,
-                    focal = r.k.fx / scale,
-                    "focal refined under its prior"
-                );
-                rec = r;
-            }
-        }
-        (Some(_), None) => {}
+    // A given focal is held through the reconstruction; under a prior it is refined at the
+    // end, on the finest observations (below).
+    if opts.focal_px.is_none()
+        && let Some(r) = refine_focal_around(&rec, long * scale, opts)
+    {
+        tracing::info!(focal = r.k.fx / scale, "focal refined");
+        rec = r;
     }
     // The finest scale whose blur stays within `refine_max_blur_px`; `blur` is in full-size px.
     let finest = if opts.refine_max_blur_px <= 0.0 {
@@ -565,6 +557,22 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         match refine::remeasure(&rec, &grays, scale, scale, blur, opts) {
             Some(r) => rec = r,
             None => tracing::info!("re-measuring left a view with too few observations; kept"),
+        }
+    }
+    if let (Some(f), Some(rel)) = (opts.focal_px, opts.focal_prior) {
+        // After coarse to fine: the finest level's observations tell the focal best
+        // (crates/gems-init/BENCHMARKS.md, "The focal prior after coarse to fine").
+        let prior = ba::Focal::Prior {
+            focal: f * scale,
+            sigma: rel * f * scale,
+        };
+        if let Some(r) = incremental::refine_focal(&rec, prior, opts) {
+            tracing::info!(
+                given = f,
+                focal = r.k.fx / scale,
+                "focal refined under its prior"
+            );
+            rec = r;
         }
     }
     let mut result = output::assemble(images, &rec, scale, opts.focal_px.is_some(), ws);
