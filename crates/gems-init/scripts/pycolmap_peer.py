@@ -1,7 +1,8 @@
 """The peer of gems's SfM: COLMAP 4 through pycolmap (CPU SIFT, exhaustive matching, the
 incremental and the global mapper) on a scene's `images/`, scored against its
 `poses_bounds.npy` the way `sfm_eval` scores gems (registered views; camera-centre RMSE after a
-Sim(3) alignment, in % of the reference path's extent; focal error).
+Sim(3) alignment, in % of the reference path's extent; mean relative-rotation error over the
+registered pairs; focal error).
 
     pip install pycolmap numpy
     python3 crates/gems-init/scripts/pycolmap_peer.py SCENE [SCENE…] [--work DIR]
@@ -22,10 +23,17 @@ import pycolmap
 
 
 def reference(scene):
-    """Camera centres and the focal of an LLFF poses_bounds.npy (N x 17)."""
+    """Camera centres, camera-to-world rotations (OpenCV axes) and the focal of an LLFF
+    poses_bounds.npy (N x 17), whose rotation columns are (down, right, back)."""
     rows = np.load(scene / "poses_bounds.npy")
     poses = rows[:, :15].reshape(-1, 3, 5)
-    return poses[:, :, 3], float(poses[0, 2, 4])
+    c2w = np.stack([poses[:, :, 1], poses[:, :, 0], -poses[:, :, 2]], axis=2)
+    return poses[:, :, 3], c2w, float(poses[0, 2, 4])
+
+
+def angle_deg(r):
+    """Rotation angle of a 3x3 rotation matrix, degrees."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))))
 
 
 def size_of(scene):
@@ -50,15 +58,24 @@ def umeyama(src, dst):
     return s, r, mu_d - s * r @ mu_s
 
 
-def score(rec, names, centres, focal_ref):
-    """Registered views, centre RMSE / extent, focal error of the largest reconstruction."""
-    est, ref = [], []
+def score(rec, names, centres, rotations, focal_ref):
+    """Registered views, centre RMSE / extent, mean relative-rotation error over all registered
+    pairs (degrees, as sfm_eval's), focal error of the largest reconstruction."""
+    est, ref, rot_est, rot_ref = [], [], [], []
     for image in rec.images.values():
         stem = pathlib.Path(image.name).stem
         if stem in names:
-            w2c = image.cam_from_world()
-            est.append(w2c.inverse().translation)
+            c2w = image.cam_from_world().inverse()
+            est.append(c2w.translation)
+            rot_est.append(c2w.rotation.matrix())
             ref.append(centres[names.index(stem)])
+            rot_ref.append(rotations[names.index(stem)])
+    pairs = [
+        angle_deg((rot_est[i].T @ rot_est[j]).T @ (rot_ref[i].T @ rot_ref[j]))
+        for i in range(len(rot_est))
+        for j in range(i + 1, len(rot_est))
+    ]
+    rot_err = float(np.mean(pairs)) if pairs else None
     extent = max(np.linalg.norm(a - b) for a in centres for b in centres)
     rmse = None
     if len(est) >= 3:
@@ -68,13 +85,13 @@ def score(rec, names, centres, focal_ref):
         rmse = float(np.sqrt(((aligned - ref) ** 2).sum(1).mean()) / extent)
     cam = next(iter(rec.cameras.values()))
     focal = float(cam.focal_length) if hasattr(cam, "focal_length") else float(cam.params[0])
-    return len(est), rmse, focal / focal_ref - 1.0
+    return len(est), rmse, rot_err, focal / focal_ref - 1.0
 
 
 def run(scene, work, mapper, focal):
     images = scene / "images"
     names = sorted(p.stem for p in images.iterdir() if p.is_file())
-    centres, focal_ref = reference(scene)
+    centres, rotations, focal_ref = reference(scene)
     out = work / scene.name / mapper
     if out.exists():
         shutil.rmtree(out)
@@ -105,11 +122,13 @@ def run(scene, work, mapper, focal):
     if not recs:
         return f"{scene}: COLMAP {pycolmap.__version__} {mapper}: no reconstruction ({seconds:.1f}s)"
     rec = max(recs.values(), key=lambda r: r.num_reg_images())
-    registered, rmse, focal_err = score(rec, names, centres, focal_ref)
+    registered, rmse, rot_err, focal_err = score(rec, names, centres, rotations, focal_ref)
     rmse_text = "—" if rmse is None else f"{100 * rmse:.2f} %"
+    rot_text = "—" if rot_err is None else f"{rot_err:.2f}°"
     return (
         f"{scene}: COLMAP {pycolmap.__version__} {mapper}: registered {registered}/{len(names)}, "
-        f"centres {rmse_text} of the extent, focal {100 * focal_err:+.1f} %, {seconds:.1f}s"
+        f"centres {rmse_text} of the extent, rel. rot err {rot_text}, "
+        f"focal {100 * focal_err:+.1f} %, {seconds:.1f}s"
     )
 
 
