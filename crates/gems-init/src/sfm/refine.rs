@@ -145,8 +145,8 @@ pub(crate) fn remeasure(
 /// The local affine map, at `at` (the projection of `x` into `src`), from pixel offsets in `src`
 /// to pixel offsets in `dst` for the surface through `x`, taken as the plane facing the bisector
 /// of the two viewing directions (the multi-view-stereo convention when the normal is unknown,
-/// e.g. PMVS, Furukawa & Ponce 2010). Central differences of one pixel; [`tracking::IDENTITY`]
-/// when the plane is seen edge-on from `src`.
+/// e.g. PMVS, Furukawa & Ponce 2010). Central differences of one pixel; the identity when the
+/// plane is seen edge-on from `src`.
 fn surface_warp(k: &Intrinsics, src: &Se3, dst: &Se3, x: &Vector3<f64>, at: &Vector2<f64>) -> Warp {
     let centre = |p: &Se3| -(p.rot.transpose() * p.trans);
     let (cs, cd) = (centre(src), centre(dst));
@@ -163,9 +163,9 @@ fn surface_warp(k: &Intrinsics, src: &Se3, dst: &Se3, x: &Vector3<f64>, at: &Vec
     let column = |d: Vector2<f64>| Some((map(at + d)? - map(at - d)?) * 0.5);
     match (column(Vector2::x()), column(Vector2::y())) {
         (Some(a), Some(b)) if a.iter().chain(b.iter()).all(|v| v.is_finite()) => {
-            [[a.x as f32, b.x as f32], [a.y as f32, b.y as f32]]
+            Warp::new(a.x as f32, b.x as f32, a.y as f32, b.y as f32)
         }
-        _ => tracking::IDENTITY,
+        _ => Warp::identity(),
     }
 }
 
@@ -174,11 +174,8 @@ mod tests {
     use super::*;
     use nalgebra::Matrix3;
 
-    fn close(w: &Warp, m: [[f32; 2]; 2]) -> bool {
-        w.iter()
-            .flatten()
-            .zip(m.iter().flatten())
-            .all(|(a, b)| (a - b).abs() < 1e-4)
+    fn close(w: &Warp, m: Warp) -> bool {
+        (w - m).abs().max() < 1e-4
     }
 
     #[test]
@@ -195,10 +192,10 @@ mod tests {
         let src = Se3::new(Matrix3::identity(), Vector3::zeros());
         let at = k.project(&src.act(&x));
         let same = surface_warp(&k, &src, &src, &x, &at);
-        assert!(close(&same, tracking::IDENTITY), "{same:?}");
+        assert!(close(&same, Warp::identity()), "{same:?}");
         // The same orientation from −x, on the same ray and twice as far: every offset halves.
         let far = Se3::new(Matrix3::identity(), x);
         let half = surface_warp(&k, &src, &far, &x, &at);
-        assert!(close(&half, [[0.5, 0.0], [0.0, 0.5]]), "{half:?}");
+        assert!(close(&half, Warp::identity() * 0.5), "{half:?}");
     }
 }

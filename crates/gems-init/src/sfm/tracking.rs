@@ -11,6 +11,7 @@
 //! pair are correlated over all shifts, and each view tracks into its best-correlated neighbours.
 
 use super::features::Gray;
+use nalgebra::Matrix2;
 use rayon::prelude::*;
 
 /// Settings, in working-level pixels.
@@ -116,22 +117,13 @@ fn best_shift(a: &Gray, b: &Gray) -> (f32, i32, i32) {
     best
 }
 
-/// A local affine map between two views' pixel offsets around corresponding points, row-major:
-/// offset d in one view ↦ `[m[0][0]·d.x + m[0][1]·d.y, m[1][0]·d.x + m[1][1]·d.y]` in the other.
-pub(crate) type Warp = [[f32; 2]; 2];
-
-/// Offsets map to themselves: the two views see the patch alike.
-pub(crate) const IDENTITY: Warp = [[1.0, 0.0], [0.0, 1.0]];
+/// A local affine map between two views' pixel offsets around corresponding points: offset d in
+/// one view ↦ `m·d` in the other (the identity when the two views see the patch alike).
+pub(crate) type Warp = Matrix2<f32>;
 
 /// The inverse of `m`, or `None` when it is (nearly) singular or flips orientation.
-pub(crate) fn invert(m: &Warp) -> Option<Warp> {
-    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
-    (det > 1e-3).then(|| {
-        [
-            [m[1][1] / det, -m[0][1] / det],
-            [-m[1][0] / det, m[0][0] / det],
-        ]
-    })
+fn invert(m: &Warp) -> Option<Warp> {
+    (m.determinant() > 1e-3).then(|| m.try_inverse()).flatten()
 }
 
 /// Normalised template of `src` around the sub-pixel point `p`, sampled at `p + m·d` for the
@@ -143,8 +135,8 @@ fn template(src: &Gray, p: [f32; 2], m: &Warp, half: i32, out: &mut Vec<f32>) ->
         for dx in -half..=half {
             let (dx, dy) = (dx as f32, dy as f32);
             out.push(src.sample(
-                p[0] + m[0][0] * dx + m[0][1] * dy,
-                p[1] + m[1][0] * dx + m[1][1] * dy,
+                p[0] + m[(0, 0)] * dx + m[(0, 1)] * dy,
+                p[1] + m[(1, 0)] * dx + m[(1, 1)] * dy,
             ));
         }
     }
@@ -493,7 +485,7 @@ pub(crate) fn track_points(
     pts.par_iter()
         .map_init(Scratch::default, |s, &pt| {
             let predicted = [pt[0] + shift[0], pt[1] + shift[1]];
-            track_point(src, dst, pt, predicted, &IDENTITY, p, s)
+            track_point(src, dst, pt, predicted, &Warp::identity(), p, s)
         })
         .collect()
 }
@@ -502,7 +494,7 @@ pub(crate) fn track_points(
 /// its position in `dst` when the track back from there lands within `p.fb_tol` of `pt`.
 ///
 /// `warp` maps pixel offsets around `pt` in `src` to offsets in `dst` (the local affine map of the
-/// surface between the two views, when a model predicts it; [`IDENTITY`] otherwise). Each
+/// surface between the two views, when a model predicts it; the identity otherwise). Each
 /// template is resampled through it, so a patch seen obliquely, rotated or at another scale in
 /// the other view is compared in that view's geometry: a translation-only match of a foreshortened
 /// patch is biased, and across a wide baseline that bias is systematic.
@@ -532,6 +524,7 @@ pub(crate) fn track_point(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector2;
 
     fn pattern(w: usize, h: usize, sx: f32, sy: f32) -> Gray {
         let mut data = vec![0.0; w * h];
@@ -571,16 +564,11 @@ mod tests {
 
     #[test]
     fn invert_undoes_a_warp_and_refuses_a_flip() {
-        let m: Warp = [[0.8, 0.3], [-0.2, 1.4]];
+        let m = Warp::new(0.8, 0.3, -0.2, 1.4);
         let inv = invert(&m).expect("invertible");
-        for (i, row) in m.iter().enumerate() {
-            for (j, (a, b)) in inv[0].iter().zip(&inv[1]).enumerate() {
-                let v = row[0] * a + row[1] * b;
-                assert!((v - f32::from(u8::from(i == j))).abs() < 1e-6);
-            }
-        }
-        assert!(invert(&[[0.0, 1.0], [1.0, 0.0]]).is_none());
-        assert!(invert(&[[1.0, 2.0], [0.5, 1.0]]).is_none());
+        assert!((m * inv - Warp::identity()).abs().max() < 1e-6);
+        assert!(invert(&Warp::new(0.0, 1.0, 1.0, 0.0)).is_none());
+        assert!(invert(&Warp::new(1.0, 2.0, 0.5, 1.0)).is_none());
     }
 
     /// A patch seen obliquely in the other view (an affine map of its offsets) is found where
@@ -592,7 +580,7 @@ mod tests {
                 + 0.6 * (0.07 * u - 0.13 * v).sin()
                 + 0.4 * (0.011 * u * v + 0.3).sin()
         };
-        let a: Warp = [[0.72, 0.22], [-0.05, 1.18]];
+        let a = Warp::new(0.72, 0.22, -0.05, 1.18);
         let inv = invert(&a).unwrap();
         let (w, h) = (140, 120);
         let (cs, cd) = ([70.0f32, 60.0], [72.3f32, 58.6]);
@@ -607,10 +595,8 @@ mod tests {
         let dst = Prepared::new(
             image(&|x, y| {
                 let (ex, ey) = (x - cd[0], y - cd[1]);
-                texture(
-                    cs[0] + inv[0][0] * ex + inv[0][1] * ey,
-                    cs[1] + inv[1][0] * ex + inv[1][1] * ey,
-                )
+                let e = inv * Vector2::new(ex, ey);
+                texture(cs[0] + e.x, cs[1] + e.y)
             })
             .gaussian(1.0),
         );
@@ -626,14 +612,12 @@ mod tests {
         let (mut warped, mut plain) = (Vec::new(), Vec::new());
         for e in [[0.0f32, 0.0], [-14.3, 9.1], [11.7, -12.4], [16.2, 14.8]] {
             let pt = [cs[0] + e[0], cs[1] + e[1]];
-            let truth = [
-                cd[0] + a[0][0] * e[0] + a[0][1] * e[1],
-                cd[1] + a[1][0] * e[0] + a[1][1] * e[1],
-            ];
+            let d = a * Vector2::new(e[0], e[1]);
+            let truth = [cd[0] + d.x, cd[1] + d.y];
             let err = |q: [f32; 2]| (q[0] - truth[0]).hypot(q[1] - truth[1]);
             let q = track_point(&src, &dst, pt, truth, &a, &p, &mut s).expect("tracked");
             warped.push(err(q));
-            if let Some(q) = track_point(&src, &dst, pt, truth, &IDENTITY, &p, &mut s) {
+            if let Some(q) = track_point(&src, &dst, pt, truth, &Warp::identity(), &p, &mut s) {
                 plain.push(err(q));
             }
         }
