@@ -200,9 +200,7 @@ fn sfm_tracking_density_flags_reach_the_sfm() {
     let focal = |extra: &[&str], name: &str| {
         let out = dir.path().join(name);
         ok(&gems(&[&["sfm", s(&scene), "-o", s(&out)], extra].concat()));
-        let report: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(out.join("sfm_report.json")).unwrap()).unwrap();
-        report["focal"].as_f64().unwrap()
+        sfm_report(&out)["focal"].as_f64().unwrap()
     };
     assert_eq!(focal(&["--focal", "80"], "held"), 80.0);
     let refined = focal(&["--focal", "80", "--focal-prior", "0.05"], "prior");
@@ -223,10 +221,7 @@ fn sfm_tracking_density_flags_reach_the_sfm() {
     let report = |extra: &[&str], name: &str| {
         let out = dir.path().join(name);
         ok(&gems(&[&["sfm", s(&scene), "-o", s(&out)], extra].concat()));
-        serde_json::from_slice::<serde_json::Value>(
-            &std::fs::read(out.join("sfm_report.json")).unwrap(),
-        )
-        .unwrap()
+        sfm_report(&out)
     };
     let coarse = report(&["--refine-max-blur", "0"], "coarse");
     assert_eq!(coarse["final_size"], coarse["working_size"]);
@@ -623,6 +618,11 @@ fn info_check_reports_each_problem_and_train_refuses_first() {
     );
 }
 
+/// The `sfm_report.json` that `gems sfm -o out` wrote.
+fn sfm_report(out: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(out.join("sfm_report.json")).unwrap()).unwrap()
+}
+
 #[test]
 fn exif_focal_is_used_and_reported() {
     let dir = tempfile::tempdir().unwrap();
@@ -667,10 +667,7 @@ fn exif_focal_is_used_and_reported() {
         "{}",
         stdout(&out)
     );
-    let report: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.path().join("sfm/sfm_report.json")).unwrap(),
-    )
-    .unwrap();
+    let report = sfm_report(&dir.path().join("sfm"));
     // Refined under the EXIF prior (2 %): moved, but not far.
     let refined = report["focal"].as_f64().unwrap();
     assert!(
@@ -687,10 +684,7 @@ fn exif_focal_is_used_and_reported() {
         "0",
     ]);
     ok(&out);
-    let report: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.path().join("sfm-held/sfm_report.json")).unwrap(),
-    )
-    .unwrap();
+    let report = sfm_report(&dir.path().join("sfm-held"));
     assert_eq!(report["focal"].as_f64(), Some(80.0), "{report}");
     // --focal overrides it.
     let out = gems(&[
