@@ -5,7 +5,7 @@
 //!        [--working-sizes 192,128] [--grid SPACING_FRAC] [--neighbours N]
 //!        [--max-reproj PX] [--focal F] [--focal-prior REL]
 //!        [--order detect|ordered|unordered] [--path-centre SIGMA] [--path-rot DEG]
-//!        [--refine-max-blur PX] [--refine-patch RATIO]
+//!        [--refine-max-blur PX] [--refine-patch RATIO] [--initial-pairs N]
 //! With `--levels-dir`, the scene is an existing folder with `images/` and `poses_bounds.npy`
 //! (e.g. a `blur_09` level of `gems synth --blur-levels`, or a Deblur-NeRF real scene, whose
 //! poses file is its COLMAP model's) instead of a generated one. `--focal` gives the SfM that
@@ -39,6 +39,7 @@ fn main() {
     let mut path_rot: Option<f64> = None;
     let mut refine: Option<f64> = None;
     let mut refine_patch: Option<f64> = None;
+    let mut initial_pairs: Option<usize> = None;
     let mut it = args[1..].iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -72,6 +73,7 @@ fn main() {
             "--path-rot" => path_rot = Some(it.next().unwrap().parse().unwrap()),
             "--refine-max-blur" => refine = Some(it.next().unwrap().parse().unwrap()),
             "--refine-patch" => refine_patch = Some(it.next().unwrap().parse().unwrap()),
+            "--initial-pairs" => initial_pairs = Some(it.next().unwrap().parse().unwrap()),
             s => panic!("unknown argument {s}"),
         }
     }
@@ -108,6 +110,9 @@ fn main() {
     }
     if let Some(r) = refine_patch {
         opts.refine_patch_blur_ratio = r;
+    }
+    if let Some(n) = initial_pairs {
+        opts.initial_pairs = n;
     }
     if let Some(o) = order {
         opts.capture_order = o;

@@ -303,6 +303,10 @@ fn bad_tracking_density_is_a_clear_error() {
             max_query_points: 0,
             ..SfmOptions::default()
         },
+        SfmOptions {
+            initial_pairs: 0,
+            ..SfmOptions::default()
+        },
     ] {
         let e = run_sfm(&s.images, &opts).unwrap_err();
         assert!(matches!(e, SfmError::InvalidOption(_)), "{e}");

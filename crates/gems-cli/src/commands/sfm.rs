@@ -61,6 +61,12 @@ pub struct Args {
     /// most this many pixels (default: 12; 0 keeps the working level's model).
     #[arg(long)]
     pub refine_max_blur: Option<f64>,
+    /// With the focal known (--focal or EXIF): grow a model from each of this many initial
+    /// pairs (the best by matches and parallax) and keep the one that explains the tracks best
+    /// (default: 3; 1 grows one model). Under heavy blur the best pair alone can lock the model
+    /// into a wrong solution.
+    #[arg(long)]
+    pub initial_pairs: Option<usize>,
     /// RANSAC seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -137,6 +143,9 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     }
     if let Some(g) = args.grid_spacing {
         opts.grid_spacing_frac = g;
+    }
+    if let Some(n) = args.initial_pairs {
+        opts.initial_pairs = n;
     }
     if let Some(b) = args.refine_max_blur {
         opts.refine_max_blur_px = b;

@@ -131,6 +131,14 @@ pub struct SfmOptions {
     /// size (9 % of the long side). Default 0.75 (crates/gems-init/BENCHMARKS.md, "Warped,
     /// blur-sized patches").
     pub refine_patch_blur_ratio: f64,
+    /// With `focal_px` given: initial pairs (the best by inliers and parallax) each grown into
+    /// a model at the working level; the model that explains the tracks best (truncated
+    /// reprojection errors over every track) is kept. Under heavy blur the best pair alone can
+    /// lock the model into a wrong basin (a 40° arc reconstructed as 27°). With the focal
+    /// unknown every focal candidate grows one model from the best pair: there more pairs
+    /// cost twice the time and were not better on average. Default 3
+    /// (crates/gems-init/BENCHMARKS.md, "Several initial pairs"); 1 grows one model.
+    pub initial_pairs: usize,
     /// Seed of every random choice (RANSAC); same seed, same result.
     pub seed: u64,
 }
@@ -176,6 +184,7 @@ impl Default for SfmOptions {
             // (crates/gems-init/BENCHMARKS.md, "Coarse to fine").
             refine_max_blur_px: 12.0,
             refine_patch_blur_ratio: 0.75,
+            initial_pairs: 3,
             seed: 0,
         }
     }
@@ -431,6 +440,13 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     let (blurs, blur, sizes) = working_sizes_by_blur(&grays, long, opts);
     tracing::info!(blur_px = blur, working_sizes = ?sizes, "estimated motion blur");
 
+    // With the focal unknown each focal candidate is one more model already, and more initial
+    // pairs per candidate did not help on average (`SfmOptions::initial_pairs`).
+    let pair_tries = if opts.focal_px.is_some() {
+        opts.initial_pairs
+    } else {
+        1
+    };
     let mut best: Option<Attempt> = None;
     let mut attempts: Vec<Attempt> = Vec::new();
     let mut t_feat = 0.0;
@@ -474,6 +490,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
                 images.len(),
                 k,
                 path.as_ref(),
+                pair_tries,
                 opts,
             );
             let Some(rec) = rec else { continue };
@@ -775,6 +792,11 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
     if opts.max_features < 16 || opts.max_reproj_px.is_nan() || opts.max_reproj_px <= 0.0 {
         return Err(SfmError::InvalidOption(
             "max_features ≥ 16 and max_reproj_px > 0 required".into(),
+        ));
+    }
+    if opts.initial_pairs == 0 {
+        return Err(SfmError::InvalidOption(
+            "initial_pairs must be ≥ 1 (1 grows one model)".into(),
         ));
     }
     if !(0.0..=0.5).contains(&opts.grid_spacing_frac) || opts.max_query_points == 0 {
