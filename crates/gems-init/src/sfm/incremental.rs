@@ -365,7 +365,7 @@ fn initial_pairs(
 /// truth, while bundle adjustment started from the true cameras converged within 5° at a lower
 /// cost; crates/gems-init/BENCHMARKS.md, "Several initial pairs"). So the model is grown from
 /// each of the best pairs, and the one that explains the tracks
-/// best ([`msac_cost`]) is kept; `tries` is how many.
+/// clearly best ([`msac_cost`], by [`INITIAL_PAIR_MARGIN`]) is kept; `tries` is how many.
 pub(crate) fn reconstruct(
     tracks: Vec<Track>,
     pairs: &[PairCorr],
@@ -381,18 +381,31 @@ pub(crate) fn reconstruct(
             continue;
         };
         let cost = msac_cost(&r, opts.max_reproj_px);
+        eprintln!(
+            "pair {i0},{j0}: cost {cost:.1} registered {}",
+            r.registered()
+        );
         tracing::debug!(
             pair = ?(i0, j0),
             registered = r.registered(),
             cost,
             "model grown from an initial pair"
         );
-        if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+        if best
+            .as_ref()
+            .is_none_or(|(c, _)| cost < (1.0 - INITIAL_PAIR_MARGIN) * *c)
+        {
             best = Some((cost, r));
         }
     }
     best.map(|(_, r)| r)
 }
+
+/// Relative cost decrease by which a model from a later initial pair must beat the kept one
+/// ([`reconstruct`]). On generated arcs the wrong basins cost 10–37 % more than the model
+/// from another pair; smaller differences (0.6 and 3.4 % on two heavily blurred scenes) chose
+/// the model farther from the truth (crates/gems-init/BENCHMARKS.md, "Several initial pairs").
+const INITIAL_PAIR_MARGIN: f64 = 0.05;
 
 /// How well a model explains all its tracks' observations, for comparing models made from the
 /// same tracks: the sum over every observation of its squared reprojection error (working px),
@@ -690,13 +703,14 @@ mod tests {
         let one = reconstruct(tracks.clone(), &pairs, 6, k, None, 1, &opts(1)).expect("model");
         let three = reconstruct(tracks.clone(), &pairs, 6, k, None, 3, &opts(3)).expect("model");
         assert_eq!(three.registered(), 6);
-        // The three candidates include the one pair's model, so the kept one is never worse.
+        // The three candidates start with the one pair's model, which only a cheaper one
+        // replaces.
         let (c1, c3) = (msac_cost(&one, 2.0), msac_cost(&three, 2.0));
         assert!(c3 <= c1, "{c3} > {c1}");
-        // And every candidate on its own is at least as costly as the kept one.
+        // And no candidate on its own beats the kept one by the margin.
         for (i0, j0, rel) in initial_pairs(&pairs, &k, &opts(3)).into_iter().take(3) {
             let r = grow(tracks.clone(), (i0, j0, rel), 6, k, None, &opts(3)).expect("model");
-            assert!(c3 <= msac_cost(&r, 2.0));
+            assert!((1.0 - INITIAL_PAIR_MARGIN) * c3 <= msac_cost(&r, 2.0));
         }
         // It reprojects the pixels to about their noise.
         assert!(three.mean_error() < 0.6, "{}", three.mean_error());

@@ -132,9 +132,10 @@ pub struct SfmOptions {
     /// blur-sized patches").
     pub refine_patch_blur_ratio: f64,
     /// With `focal_px` given: initial pairs (the best by inliers and parallax) each grown into
-    /// a model at the working level; the model that explains the tracks best (truncated
-    /// reprojection errors over every track) is kept. Under heavy blur the best pair alone can
-    /// lock the model into a wrong basin (a 40° arc reconstructed as 27°). With the focal
+    /// a model at the working level; the best pair's model is kept unless another explains
+    /// the tracks clearly better (truncated reprojection errors over every track, 5 % lower).
+    /// Under heavy blur the best pair alone can lock the model into a wrong basin (a 40° arc
+    /// reconstructed as 27°). With the focal
     /// unknown every focal candidate grows one model from the best pair: there more pairs
     /// cost twice the time and were not better on average. Default 3
     /// (crates/gems-init/BENCHMARKS.md, "Several initial pairs"); 1 grows one model.
