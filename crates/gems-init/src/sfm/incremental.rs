@@ -381,10 +381,6 @@ pub(crate) fn reconstruct(
             continue;
         };
         let cost = msac_cost(&r, opts.max_reproj_px);
-        eprintln!(
-            "pair {i0},{j0}: cost {cost:.1} registered {}",
-            r.registered()
-        );
         tracing::debug!(
             pair = ?(i0, j0),
             registered = r.registered(),
