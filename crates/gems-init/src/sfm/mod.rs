@@ -536,8 +536,14 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     };
     // A given focal is held through the reconstruction; under a prior it is refined at the
     // end, on the finest observations (below).
+    // The focal candidates that explain the tracks as well as the kept one, at its level.
+    let tied: Vec<f64> = tied_attempts(&attempts)
+        .into_iter()
+        .filter(|a| a.working_size == ws)
+        .map(|a| a.focal_start_px * scale)
+        .collect();
     if opts.focal_px.is_none()
-        && let Some(r) = refine_focal_around(&rec, long * scale, opts)
+        && let Some(r) = refine_focal_around(&rec, long * scale, &tied, opts)
     {
         tracing::info!(focal = r.k.fx / scale, "focal refined");
         rec = r;
@@ -691,14 +697,26 @@ fn textureless_views(
     Ok(names)
 }
 
-/// Refines the focal of `rec` within a bracket halfway (geometrically) to the neighbouring focal
-/// candidates of its own (`long_px`: the long image side at the working scale); `None` when the
-/// refinement does not improve it.
+/// Refines the focal of `rec` in a bundle adjustment, keeping the result only within a bracket:
+/// when several focal candidates explain the tracks equally well (`tied`, their starting focals
+/// at the working scale), the span of those candidates, since the data did not choose among
+/// them and the tie-break toward [`FOCAL_PRIOR`] is only a guess (on generated arcs at blur level
+/// 5 it picked 1.1× the long side for a focal of 0.87×, which the refinement then moved most of
+/// the way back; crates/gems-init/BENCHMARKS.md, "The focal refined across tied candidates");
+/// otherwise halfway (geometrically) to the neighbouring candidates of its own (`long_px`: the
+/// long image side at the working scale). `None` when the refinement does not improve it.
 fn refine_focal_around(
     rec: &incremental::Recon,
     long_px: f64,
+    tied: &[f64],
     opts: &SfmOptions,
 ) -> Option<incremental::Recon> {
+    if tied.len() > 1 {
+        let (lo, hi) = tied
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(l, h), &f| (l.min(f), h.max(f)));
+        return incremental::refine_focal_bounded(rec, lo, hi, opts);
+    }
     let f0 = rec.k.fx;
     let mut c: Vec<f64> = opts.focal_candidates.iter().map(|c| c * long_px).collect();
     c.sort_by(|a, b| a.total_cmp(b));
@@ -737,26 +755,33 @@ const FOCAL_ERROR_TIE: f64 = 0.01;
 /// breaks ties between equally good focal candidates.
 const FOCAL_PRIOR: f64 = 1.0;
 
-/// The best attempt so far: most registered views; among those, errors within
-/// [`FOCAL_ERROR_TIE`] of the smallest are ties, and the tie whose starting focal is nearest
-/// [`FOCAL_PRIOR`] wins.
-fn choose_attempt(attempts: &[Attempt], long: f64) -> Option<&Attempt> {
-    let nreg = attempts.iter().map(|a| a.recon.registered()).max()?;
+/// The attempts that are equally good: most registered views, and among those errors within
+/// [`FOCAL_ERROR_TIE`] of the smallest.
+fn tied_attempts(attempts: &[Attempt]) -> Vec<&Attempt> {
+    let Some(nreg) = attempts.iter().map(|a| a.recon.registered()).max() else {
+        return Vec::new();
+    };
     let min_err = attempts
         .iter()
         .filter(|a| a.recon.registered() == nreg)
         .map(|a| a.error_px)
         .fold(f64::INFINITY, f64::min);
-    let prior = FOCAL_PRIOR * long;
-    let dist = |f: f64| (f / prior).ln().abs();
     attempts
         .iter()
         .filter(|a| a.recon.registered() == nreg && a.error_px <= min_err * (1.0 + FOCAL_ERROR_TIE))
-        .min_by(|a, b| {
-            dist(a.focal_start_px)
-                .total_cmp(&dist(b.focal_start_px))
-                .then(a.error_px.total_cmp(&b.error_px))
-        })
+        .collect()
+}
+
+/// The best attempt so far: of the [`tied_attempts`], the one whose starting focal is nearest
+/// [`FOCAL_PRIOR`].
+fn choose_attempt(attempts: &[Attempt], long: f64) -> Option<&Attempt> {
+    let prior = FOCAL_PRIOR * long;
+    let dist = |f: f64| (f / prior).ln().abs();
+    tied_attempts(attempts).into_iter().min_by(|a, b| {
+        dist(a.focal_start_px)
+            .total_cmp(&dist(b.focal_start_px))
+            .then(a.error_px.total_cmp(&b.error_px))
+    })
 }
 
 fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
@@ -1171,6 +1196,53 @@ fn epipolar_inliers(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An attempt at working size 128 (scale 0.5) from focal `f` (full-size px) that registered
+    /// `registered` of 4 views with mean error `error_px`.
+    fn attempt(f: f64, registered: usize, error_px: f64) -> Attempt {
+        let k = gems_math::Intrinsics {
+            fx: 0.5 * f,
+            fy: 0.5 * f,
+            cx: 64.0,
+            cy: 40.0,
+            width: 128,
+            height: 80,
+        };
+        Attempt {
+            recon: incremental::Recon {
+                k,
+                poses: (0..4)
+                    .map(|v| (v < registered).then(gems_math::Se3::identity))
+                    .collect(),
+                tracks: Vec::new(),
+                path: None,
+            },
+            working_size: 128,
+            scale: 0.5,
+            error_px,
+            focal_start_px: f,
+        }
+    }
+
+    #[test]
+    fn ties_are_the_most_registered_within_the_error_tolerance() {
+        let attempts = vec![
+            attempt(150.0, 4, 1.000),
+            attempt(200.0, 4, 1.005),
+            attempt(250.0, 4, 1.020),
+            attempt(300.0, 3, 0.500),
+        ];
+        let tied: Vec<f64> = tied_attempts(&attempts)
+            .iter()
+            .map(|a| a.focal_start_px)
+            .collect();
+        // 300 registered fewer views, 250 is 2 % worse than the best.
+        assert_eq!(tied, vec![150.0, 200.0]);
+        // Of the ties, the one nearest the prior (1.0 × the long side, 256 px) wins.
+        let best = choose_attempt(&attempts, 256.0).expect("an attempt");
+        assert_eq!(best.focal_start_px, 200.0);
+        assert!(tied_attempts(&[]).is_empty());
+    }
 
     /// Overlaps of views placed along a line at `position`: the nearer, the more similar.
     fn overlaps_along(position: &[f64]) -> Vec<Vec<tracking::Overlap>> {
