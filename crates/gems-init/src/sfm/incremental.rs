@@ -407,7 +407,7 @@ const INITIAL_PAIR_MARGIN: f64 = 0.05;
 /// same tracks: the sum over every observation of its squared reprojection error (working px),
 /// truncated at `tau²` (MSAC, Torr & Zisserman 2000); an observation in a view without a pose,
 /// of a track without a point, or behind its camera costs `tau²`.
-pub(crate) fn msac_cost(r: &Recon, tau: f64) -> f64 {
+fn msac_cost(r: &Recon, tau: f64) -> f64 {
     let cap = tau * tau;
     r.tracks
         .iter()
