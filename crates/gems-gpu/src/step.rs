@@ -62,6 +62,8 @@ pub struct StepSettings {
 pub struct StepResult {
     /// Fused loss plus the regularisers (the trainer's loss curve).
     pub loss: f32,
+    /// The fused loss alone, (1−λ)·L1 + λ·(1−SSIM) of the blur model against the view's image.
+    pub photometric_loss: f32,
     /// PSNR of the blurred render against the view's image.
     pub psnr: f32,
     /// dL/dR (row-major) of each virtual camera (world-to-camera).
@@ -231,6 +233,7 @@ impl ResidentStep {
         let reg = f32s(&bytes[2])[0];
         Ok(StepResult {
             loss: scalars[0] + reg,
+            photometric_loss: scalars[0],
             psnr: scalars[3],
             cam_rotation: pose
                 .chunks_exact(POSE_FLOATS)

@@ -135,6 +135,7 @@ fn resident_step_matches_the_host_chain() {
     // Same kernels on the same inputs: the same bits (the renderer packs on the GPU instead of
     // the CPU, a pure copy).
     assert_eq!(out.loss.to_bits(), (scalars.loss + reg_value).to_bits());
+    assert_eq!(out.photometric_loss.to_bits(), scalars.loss.to_bits());
     assert_eq!(out.psnr.to_bits(), scalars.psnr.to_bits());
     assert_eq!(out.cam_rotation, host.cam_rotation);
     assert_eq!(out.cam_translation, host.cam_translation);

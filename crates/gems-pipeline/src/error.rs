@@ -37,6 +37,13 @@ pub enum PipelineError {
     /// The model COLMAP reconstructed could not be written.
     #[error("writing the imported COLMAP model")]
     WriteColmapModel(#[source] gems_data::DataError),
+    /// `sfm_rerun/choice.json`, written by an earlier run, could not be read.
+    #[error("reading {}", path.display())]
+    ReadChoice {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
     #[error(transparent)]
     Fs(#[from] gems_fs::FsError),
     #[error(transparent)]

@@ -16,6 +16,7 @@ use crate::init::{
     Init, InitRequest, init_images, place_missing_views, rerun_init_on_renders, reruns_on_renders,
     resolve_init,
 };
+use crate::probe::{RerunChoice, probe};
 
 /// A whole run: a scene, where its initialisation comes from, and what to do after training.
 pub struct TrainRequest {
@@ -121,10 +122,17 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         .filter(|_| reruns_on_renders(init.init))
     {
         let rerun = req.output.join("sfm_rerun");
-        let reuse = req.resume && rerun.join("sparse").join("0").join("images.bin").is_file();
-        let mut keep_rerun = reuse;
-        if reuse {
-            tracing::info!(dir = %rerun.display(), "reusing the model from the first pass's renders");
+        let renders_model = rerun.join("sparse").join("0");
+        // A resumed run keeps the choice an earlier one made (and the model it kept).
+        let earlier = if req.resume {
+            RerunChoice::read(&rerun)?
+                .filter(|c| !c.kept || renders_model.join("images.bin").is_file())
+        } else {
+            None
+        };
+        let choice = if let Some(choice) = earlier {
+            tracing::info!(kept = choice.kept, reason = %choice.reason, "reusing the choice between the first model and the renders' model");
+            choice
         } else {
             tracing::info!(
                 steps = first_steps,
@@ -159,17 +167,59 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             let second =
                 rerun_init_on_renders(&mut engine, &first, &source, &rerun, &init, cfg.seed);
             let rendered: Vec<String> = first.views.iter().map(|v| v.name.clone()).collect();
-            keep_rerun = accept_rerun(second, &mode, &rerun, &rendered)?;
-        }
+            let choice = if !accept_rerun(second, &mode, &rerun, &rendered)? {
+                RerunChoice::without_probes(
+                    false,
+                    "the initialiser failed on the renders or left a trained view out".into(),
+                )
+            } else if let Some(probe_steps) = cfg.sfm_rerun_probe_steps(rest) {
+                // Both candidates train alike: the run proper's schedule and seed, its own
+                // pose.straight_fraction, for the probe's steps.
+                let mut probe_cfg = cfg.clone();
+                probe_cfg.steps = rest;
+                probe_cfg.init.sfm_rerun_fraction = 0.0;
+                tracing::info!(
+                    steps = probe_steps,
+                    "probing the first model and the renders' model against the blurry photos"
+                );
+                let (first_loss, back) = probe(&scene, &mode, &probe_cfg, probe_steps, engine)?;
+                let renders_mode = InitMode::Colmap(Some(renders_model.clone()));
+                let (renders_loss, back) =
+                    probe(&scene, &renders_mode, &probe_cfg, probe_steps, back)?;
+                engine = back;
+                RerunChoice::from_probes(probe_steps, first_loss, renders_loss)
+            } else {
+                RerunChoice::without_probes(
+                    true,
+                    "it registered every trained view (init.sfm_rerun_probe_fraction = 0)".into(),
+                )
+            };
+            std::fs::create_dir_all(&rerun).map_err(|source| PipelineError::CreateDir {
+                path: rerun.clone(),
+                source,
+            })?;
+            choice.write(&rerun)?;
+            if choice.kept {
+                tracing::info!(reason = %choice.reason, "training from the model initialised on the renders");
+            } else {
+                tracing::warn!(
+                    "the model initialised on the first pass's renders is not kept ({}); \
+                     training from the first model with all the steps",
+                    choice.reason
+                );
+            }
+            choice
+        };
+        let keep_rerun = choice.kept;
         description.init = if keep_rerun {
             format!(
-                "{}, then again on the first pass's sharp renders ({first_steps} + {rest} steps)",
-                description.init
+                "{}, then again on the first pass's sharp renders ({first_steps} + {rest} steps; {})",
+                description.init, choice.reason
             )
         } else {
             format!(
-                "{} (initialising again on the first pass's renders was tried and not kept)",
-                description.init
+                "{} (initialising again on the first pass's renders was tried and not kept: {})",
+                description.init, choice.reason
             )
         };
         if keep_rerun {
@@ -269,12 +319,12 @@ fn peak_memory_bytes() -> Option<u64> {
     Some(kib * 1024)
 }
 
-/// Whether the model initialised on the first pass's renders replaces the first one: when the
-/// initialiser registered every `rendered` view the first model had. Views the first model had
-/// and it lacks (held-out photos that did not register among the renders) are then placed by
-/// the similarity between the models ([`place_missing_views`]) and the model is rewritten. A
-/// rejected model's `sparse` folder is removed, so that a resumed run decides again, the same
-/// way; its images stay for inspection.
+/// Whether the model initialised on the first pass's renders may replace the first one: when the
+/// initialiser registered every `rendered` view the first model had (the probes then decide,
+/// [`crate::probe`]). Views the first model had and it lacks (held-out photos that did not
+/// register among the renders) are then placed by the similarity between the models
+/// ([`place_missing_views`]) and the model is rewritten. A rejected model's `sparse` folder is
+/// removed; its images stay for inspection.
 fn accept_rerun(
     second: Result<PathBuf, PipelineError>,
     first: &InitMode,
@@ -311,7 +361,10 @@ fn accept_rerun(
                     )
                     .map_err(PipelineError::WriteColmapModel)?;
                 }
-                tracing::info!(views, "training from the model initialised on the renders");
+                tracing::info!(
+                    views,
+                    "the model initialised on the renders registered every trained view"
+                );
                 return Ok(true);
             }
             format!("it registered {views} of the trained views, the first model {before}")
@@ -319,10 +372,7 @@ fn accept_rerun(
         Err(PipelineError::Sfm(e)) => format!("the initialiser failed on them: {e}"),
         Err(e) => return Err(e),
     };
-    tracing::warn!(
-        "initialising again on the first pass's renders did not work ({reason}); training \
-         from the first model with all the steps"
-    );
+    tracing::warn!("initialising again on the first pass's renders did not work ({reason})");
     let sparse = rerun.join("sparse");
     if sparse.is_dir() {
         std::fs::remove_dir_all(&sparse).map_err(|source| gems_fs::FsError {

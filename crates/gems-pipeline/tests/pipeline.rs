@@ -132,6 +132,8 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
         req.resume = resume;
         req.cfg.init.sfm_rerun_fraction = 0.5;
         req.cfg.init.sfm_rerun_min_steps = 1;
+        // No probe: the renders' model is kept because it registers (the probe has its test).
+        req.cfg.init.sfm_rerun_probe_fraction = 0.0;
         req.evaluate = false;
         // Every view trains, so every image the SfM saw is a render the second time.
         req.open.hold = Some(0);
@@ -213,4 +215,104 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     std::fs::remove_dir_all(out.join("sfm_rerun")).unwrap();
     let resumed = run_with(&out, true);
     assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
+}
+
+#[test]
+fn the_probe_scores_exact_cameras_below_perturbed_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("scene");
+    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &root).unwrap();
+    let scene = gems_data::open_scene(&root, &gems_data::OpenOptions::default()).unwrap();
+    let cfg = TrainConfig {
+        steps: 100,
+        seed: 5,
+        ..TrainConfig::default()
+    };
+    let score = |mode: &gems_train::InitMode| {
+        gems_pipeline::probe::probe(&scene, mode, &cfg, 30, Engine::cpu())
+            .unwrap()
+            .0
+    };
+    let exact = score(&gems_train::InitMode::Gt);
+    let perturbed = score(&gems_train::InitMode::GtNoisy {
+        translation_std: 0.05,
+        rotation_std: 0.05,
+    });
+    assert!(exact.is_finite() && perturbed.is_finite());
+    assert!(
+        exact < perturbed,
+        "exact {exact} against perturbed {perturbed}"
+    );
+    assert_eq!(
+        exact,
+        score(&gems_train::InitMode::Gt),
+        "same seed, same score"
+    );
+}
+
+#[test]
+fn sfm_rerun_keeps_the_renders_model_only_as_its_probe_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene");
+    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    let out = dir.path().join("run");
+    let run = |resume: bool| {
+        let mut req = request(&scene, &out, InitRequest::new(Init::Sfm));
+        req.resume = resume;
+        req.cfg.init.sfm_rerun_fraction = 0.5;
+        req.cfg.init.sfm_rerun_min_steps = 1;
+        req.cfg.init.sfm_rerun_probe_fraction = 0.4;
+        req.evaluate = false;
+        req.open.hold = Some(0);
+        train_scene(req).unwrap()
+    };
+    let first = run(false);
+    let choice = gems_pipeline::probe::RerunChoice::read(&out.join("sfm_rerun"))
+        .unwrap()
+        .expect("the choice is written");
+    assert_eq!(choice.probe_steps, 4, "0.4 of the run proper's 10 steps");
+    let (a, b) = (
+        choice.loss_first_model.unwrap(),
+        choice.loss_renders_model.unwrap(),
+    );
+    assert!(a.is_finite() && b.is_finite() && a > 0.0 && b > 0.0);
+    assert_eq!(choice.kept, b < a);
+    // The run proper follows the choice.
+    let cfg = TrainConfig::from_toml_file(&out.join("config.toml")).unwrap();
+    let trained = gems_train::TrainOutput::load(&out).unwrap();
+    let run_description = trained.run.expect("a pipeline run describes itself");
+    if choice.kept {
+        assert_eq!(cfg.steps, 10);
+        assert!(trained.init_label.contains("sfm_rerun"));
+        assert!(
+            run_description
+                .init
+                .contains("then again on the first pass's sharp renders")
+        );
+    } else {
+        assert_eq!(cfg.steps, 20);
+        assert!(!trained.init_label.contains("sfm_rerun"));
+        assert!(run_description.init.contains("tried and not kept"));
+    }
+    assert!(
+        run_description.init.contains(&choice.reason),
+        "{}",
+        run_description.init
+    );
+    // Resumed after the choice: the same choice and the same result, without probing again.
+    let cloud = std::fs::read(&first.point_cloud).unwrap();
+    for f in [
+        "checkpoint.json",
+        "checkpoint.safetensors",
+        "point_cloud.ply",
+    ] {
+        std::fs::remove_file(out.join(f)).unwrap();
+    }
+    std::fs::remove_dir_all(out.join("first_pass")).unwrap();
+    let resumed = run(true);
+    assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
+    assert!(
+        !out.join("first_pass").exists(),
+        "a resumed run with a choice does not train the first pass again"
+    );
 }

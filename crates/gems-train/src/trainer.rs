@@ -125,7 +125,12 @@ pub struct TrainState {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepReport {
     pub step: usize,
+    /// What the step minimised: the photometric loss plus the MCMC regularisers and the
+    /// trajectory energies.
     pub loss: f32,
+    /// (1−λ)·L1 + λ·(1−SSIM) of the blur model against the step's photo alone (before the
+    /// step's update): comparable between trainings whatever their Gaussians' scales.
+    pub photometric_loss: f32,
     pub psnr: f32,
     pub gaussians: usize,
     /// Virtual views the step rendered.
@@ -559,7 +564,7 @@ impl Trainer {
             *kg = [0.0; 6];
         }
         let times = self.render_times(v, &traj, step);
-        let (mut loss, train_psnr) = if self.resident.is_some() {
+        let (mut loss, photometric_loss, train_psnr) = if self.resident.is_some() {
             self.gaussian_step_resident(v, bg, &traj, &times, step, sh_degree)?
         } else {
             self.gaussian_step_host(v, bg, &traj, &times, step)?
@@ -633,6 +638,7 @@ impl Trainer {
         Ok(StepReport {
             step: self.state.step,
             loss,
+            photometric_loss,
             psnr: train_psnr,
             gaussians: count,
             virtual_views: times.len(),
@@ -640,7 +646,7 @@ impl Trainer {
     }
 
     /// Render, loss, backward, regularisers and Adam on the host-side Gaussians (any
-    /// [`Rasterizer`]); returns (loss, PSNR) and leaves the knot gradients in `knot_grads`.
+    /// [`Rasterizer`]); returns (loss with the regularisers, photometric loss, PSNR) and leaves the knot gradients in `knot_grads`.
     fn gaussian_step_host(
         &mut self,
         v: usize,
@@ -648,7 +654,7 @@ impl Trainer {
         traj: &Trajectory,
         times: &[f64],
         step: usize,
-    ) -> Result<(f32, f32), TrainError> {
+    ) -> Result<(f32, f32, f32), TrainError> {
         let level = self.resolution_level(step);
         let (k, _) = view_at_level(&self.views, &self.coarse, v, level);
         let li = self.loss_for(k.width, k.height)?;
@@ -689,7 +695,7 @@ impl Trainer {
         )?;
         let reg = add_regularizers(&self.cfg, &self.state.gaussians, &mut grads);
         self.adam_gaussians(&grads, step);
-        Ok((lv.loss + reg, train_psnr))
+        Ok((lv.loss + reg, lv.loss, train_psnr))
     }
 
     /// The same on the GPU-resident Gaussians (`gems_gpu::ResidentStep`): only the pose
@@ -702,7 +708,7 @@ impl Trainer {
         times: &[f64],
         step: usize,
         sh_degree: u32,
-    ) -> Result<(f32, f32), TrainError> {
+    ) -> Result<(f32, f32, f32), TrainError> {
         let level = self.resolution_level(step);
         let (Engine::Gpu(r), Some(res)) = (&mut self.renderer, &mut self.resident) else {
             return Err(TrainError::Input(
@@ -739,7 +745,7 @@ impl Trainer {
             &out.cam_translation,
             &mut self.knot_grads,
         );
-        Ok((out.loss, out.psnr))
+        Ok((out.loss, out.photometric_loss, out.psnr))
     }
 
     /// MCMC relocation then growth, on the host Gaussians or the resident ones (same draws

@@ -184,7 +184,14 @@ fn check_same_seed_and_resume(cfg: &TrainConfig) -> TrainState {
     let dir = tempfile::tempdir().unwrap();
     let mut c = trainer(&cfg);
     for _ in 0..10 {
-        c.step().unwrap();
+        let r = c.step().unwrap();
+        // The photometric part alone: the MCMC regularisers (both weights > 0) come on top.
+        assert!(
+            r.photometric_loss > 0.0 && r.photometric_loss < r.loss,
+            "photometric {} of {}",
+            r.photometric_loss,
+            r.loss
+        );
     }
     save_checkpoint(dir.path(), &c).unwrap();
     assert!(has_checkpoint(dir.path()));

@@ -1,0 +1,165 @@
+//! Whether the model initialised on the first pass's renders replaces the first one, decided by
+//! how well each fits the blurry photos (`init.sfm_rerun_probe_fraction`).
+//!
+//! The renders' model helps when the blurry photos' tracks leave the first model distorted
+//! (extreme blur), and hurts when the first model was already good and the renders are less
+//! precise than the photos (Deblur-NeRF's real `blurball`: photos at 2400×1600 with moderate
+//! blur, renders of a model trained at 300×200). Neither model can be compared with the truth,
+//! and reprojection errors do not tell them apart (the renders' SfM fits its own tracks as well
+//! as the photos' SfM fits theirs). What both are for is fitting the photos: so each trains,
+//! from scratch and alike, for a short probe, and the one whose blur model then reproduces the
+//! photos better is kept.
+
+use std::path::{Path, PathBuf};
+
+use gems_gpu::Engine;
+use gems_train::{InitMode, TrainConfig, Trainer, prepare_input};
+use serde::{Deserialize, Serialize};
+
+use crate::PipelineError;
+
+/// The file in `sfm_rerun/` that records the choice.
+const CHOICE_FILE: &str = "choice.json";
+
+/// Which model the run proper trains from, and what it was chosen by. Written to
+/// `sfm_rerun/choice.json`, so that a resumed run keeps the choice without training its first
+/// pass and probes again.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RerunChoice {
+    /// The run proper trains from the model initialised on the renders.
+    pub kept: bool,
+    /// Why, in words (the run's description quotes it).
+    pub reason: String,
+    /// Steps each probe trained (0: no probe ran).
+    pub probe_steps: usize,
+    /// Each probe's mean training loss over its second half ([`probe_score`]); `None` when no
+    /// probe ran.
+    pub loss_first_model: Option<f64>,
+    pub loss_renders_model: Option<f64>,
+}
+
+impl RerunChoice {
+    /// The choice an earlier run wrote into `dir`, if any.
+    pub fn read(dir: &Path) -> Result<Option<Self>, PipelineError> {
+        let path = dir.join(CHOICE_FILE);
+        if !path.is_file() {
+            return Ok(None);
+        }
+        let bytes = std::fs::read(&path).map_err(|source| gems_fs::FsError {
+            path: path.clone(),
+            source,
+        })?;
+        serde_json::from_slice(&bytes)
+            .map(Some)
+            .map_err(|source| PipelineError::ReadChoice { path, source })
+    }
+
+    /// Writes the choice into `dir` (atomically).
+    pub fn write(&self, dir: &Path) -> Result<PathBuf, PipelineError> {
+        let path = dir.join(CHOICE_FILE);
+        let json = serde_json::to_vec_pretty(self).expect("a choice serialises");
+        gems_fs::write_atomic(&path, &json)?;
+        Ok(path)
+    }
+
+    /// The choice from both probes' scores: the renders' model is kept only when its score is
+    /// finite and lower than the first model's (a non-finite score never wins; a non-finite
+    /// first score loses to any finite one).
+    pub fn from_probes(probe_steps: usize, first: f64, renders: f64) -> Self {
+        let kept = renders.is_finite() && (!first.is_finite() || renders < first);
+        let relation = if kept { "below" } else { "not below" };
+        Self {
+            kept,
+            reason: format!(
+                "after {probe_steps} probe steps each, its loss against the blurry photos \
+                 {renders:.4} is {relation} the first model's {first:.4}"
+            ),
+            probe_steps,
+            loss_first_model: Some(first),
+            loss_renders_model: Some(renders),
+        }
+    }
+
+    /// A choice made without probes (`reason` says why).
+    pub fn without_probes(kept: bool, reason: String) -> Self {
+        Self {
+            kept,
+            reason,
+            probe_steps: 0,
+            loss_first_model: None,
+            loss_renders_model: None,
+        }
+    }
+}
+
+/// A probe's score: the mean of its step losses over the second half of its steps (the first
+/// half is dominated by how far the initial points are from a fit; every step's loss is that of
+/// one training photo's blur model before the step's update). `NaN` for no steps.
+pub fn probe_score(losses: &[f32]) -> f64 {
+    let tail = &losses[losses.len() / 2..];
+    tail.iter().map(|&l| f64::from(l)).sum::<f64>() / tail.len() as f64
+}
+
+/// Trains from `mode` with `cfg` (a fresh trainer: nothing is read from or written to disk) for
+/// `steps` steps on `engine`, and returns the probe's [`probe_score`] and the engine.
+pub fn probe(
+    scene: &gems_data::Scene,
+    mode: &InitMode,
+    cfg: &TrainConfig,
+    steps: usize,
+    engine: Engine,
+) -> Result<(f64, Engine), PipelineError> {
+    let input = prepare_input(scene, mode, cfg)?;
+    let mut trainer = Trainer::new(cfg.clone(), input)?;
+    trainer.set_engine(engine);
+    let mut losses = Vec::with_capacity(steps);
+    for _ in 0..steps.min(cfg.steps) {
+        losses.push(trainer.step()?.photometric_loss);
+    }
+    let engine = trainer.set_engine(Engine::cpu());
+    Ok((probe_score(&losses), engine))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_score_is_the_mean_of_the_second_half() {
+        assert_eq!(probe_score(&[9.0, 9.0, 1.0, 3.0]), 2.0);
+        assert_eq!(probe_score(&[9.0, 1.0, 2.0]), 1.5, "the middle step counts");
+        assert_eq!(probe_score(&[4.0]), 4.0);
+        assert!(probe_score(&[]).is_nan());
+    }
+
+    #[test]
+    fn the_renders_model_is_kept_only_when_it_fits_better() {
+        assert!(RerunChoice::from_probes(200, 0.12, 0.11).kept);
+        assert!(!RerunChoice::from_probes(200, 0.11, 0.12).kept);
+        assert!(
+            !RerunChoice::from_probes(200, 0.11, 0.11).kept,
+            "a tie keeps the first"
+        );
+        assert!(!RerunChoice::from_probes(200, 0.11, f64::NAN).kept);
+        assert!(RerunChoice::from_probes(200, f64::NAN, 0.11).kept);
+        let c = RerunChoice::from_probes(200, 0.2, 0.1);
+        assert!(
+            c.reason
+                .contains("0.1000 is below the first model's 0.2000"),
+            "{}",
+            c.reason
+        );
+    }
+
+    #[test]
+    fn a_choice_is_written_and_read_back() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(RerunChoice::read(dir.path()).unwrap(), None);
+        let c = RerunChoice::from_probes(7, 0.25, 0.5);
+        c.write(dir.path()).unwrap();
+        assert_eq!(RerunChoice::read(dir.path()).unwrap(), Some(c));
+        std::fs::write(dir.path().join(CHOICE_FILE), b"{").unwrap();
+        let err = RerunChoice::read(dir.path()).unwrap_err();
+        assert!(err.to_string().contains("choice.json"), "{err}");
+    }
+}
