@@ -1,14 +1,15 @@
 //! Whether the model initialised on the first pass's renders replaces the first one, decided by
-//! how well each fits the blurry photos (`init.sfm_rerun_probe_fraction`).
+//! how well each fits the blurry photos after a short training (`init.sfm_rerun_probe_fraction`,
+//! off by default).
 //!
 //! The renders' model helps when the blurry photos' tracks leave the first model distorted
-//! (extreme blur), and hurts when the first model was already good and the renders are less
-//! precise than the photos (Deblur-NeRF's real `blurball`: photos at 2400×1600 with moderate
-//! blur, renders of a model trained at 300×200). Neither model can be compared with the truth,
-//! and reprojection errors do not tell them apart (the renders' SfM fits its own tracks as well
-//! as the photos' SfM fits theirs). What both are for is fitting the photos: so each trains,
-//! from scratch and alike, for a short probe, and the one whose blur model then reproduces the
-//! photos better is kept.
+//! (extreme blur) and can hurt when the first model was already good (Deblur-NeRF's real
+//! `blurball`: photos at 2400×1600 with moderate blur, renders of a model trained at 300×200).
+//! Neither can be compared with the truth; what both are for is fitting the photos, so each
+//! trains, from scratch and alike, for a short probe, and the one whose blur model then
+//! reproduces the photos better is kept. Measured, that choice was right on `blurball` and
+//! wrong on a generated extreme-blur scene (BENCHMARKS.md, "A probe to choose the renders'
+//! model"), hence off by default.
 
 use std::path::{Path, PathBuf};
 

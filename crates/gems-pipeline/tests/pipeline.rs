@@ -132,8 +132,6 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
         req.resume = resume;
         req.cfg.init.sfm_rerun_fraction = 0.5;
         req.cfg.init.sfm_rerun_min_steps = 1;
-        // No probe: the renders' model is kept because it registers (the probe has its test).
-        req.cfg.init.sfm_rerun_probe_fraction = 0.0;
         req.evaluate = false;
         // Every view trains, so every image the SfM saw is a render the second time.
         req.open.hold = Some(0);
