@@ -194,10 +194,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                     "it registered every trained view (init.sfm_rerun_probe_fraction = 0)".into(),
                 )
             };
-            std::fs::create_dir_all(&rerun).map_err(|source| PipelineError::CreateDir {
-                path: rerun.clone(),
-                source,
-            })?;
+            // Written (with its folder) also when the initialiser failed before making one.
             choice.write(&rerun)?;
             if choice.kept {
                 tracing::info!(reason = %choice.reason, "training from the model initialised on the renders");

@@ -63,8 +63,8 @@ pub struct Args {
     pub refine_max_blur: Option<f64>,
     /// With the focal known (--focal or EXIF): grow a model from each of this many initial
     /// pairs (the best by matches and parallax) and keep the best pair's unless another
-    /// explains the tracks clearly better (default: 3; 1 grows one model). Under heavy blur the best pair alone can lock the model
-    /// into a wrong solution.
+    /// explains the tracks clearly better (default: 3; 1 grows one model). Under heavy blur the
+    /// best pair alone can lock the model into a wrong solution.
     #[arg(long)]
     pub initial_pairs: Option<usize>,
     /// RANSAC seed.

@@ -135,9 +135,9 @@ pub struct SfmOptions {
     /// a model at the working level; the best pair's model is kept unless another explains
     /// the tracks clearly better (truncated reprojection errors over every track, 5 % lower).
     /// Under heavy blur the best pair alone can lock the model into a wrong basin (a 40° arc
-    /// reconstructed as 27°). With the focal
-    /// unknown every focal candidate grows one model from the best pair: there more pairs
-    /// cost twice the time and were not better on average. Default 3
+    /// reconstructed as 27°). With the focal unknown every focal candidate grows one model from
+    /// the best pair: there more pairs cost twice the time and were not better on average.
+    /// Default 3
     /// (crates/gems-init/BENCHMARKS.md, "Several initial pairs"); 1 grows one model.
     pub initial_pairs: usize,
     /// Seed of every random choice (RANSAC); same seed, same result.
