@@ -6,15 +6,20 @@
 //! (extreme blur) and can hurt when the first model was already good (Deblur-NeRF's real
 //! `blurball`: photos at 2400×1600 with moderate blur, renders of a model trained at 300×200).
 //! Neither can be compared with the truth; what both are for is fitting the photos, so each
-//! trains, from scratch and alike, for a short probe, and the one whose blur model then
-//! reproduces the photos better is kept. Measured, that choice was right on `blurball` and
-//! wrong on a generated extreme-blur scene (BENCHMARKS.md, "A probe to choose the renders'
-//! model"), hence off by default.
+//! trains as its run proper would (steps, schedule, straight paths, seed) for a short probe, and
+//! the one whose blur model then reproduces the photos better is kept; its run proper continues
+//! from its probe, so only the other probe's steps are extra. Measured, the choice depends on
+//! where the probe stops — right on `blurball` and wrong on a generated extreme-blur scene at
+//! 200 steps, right on both at 400, wrong on `blurball` at 600 (BENCHMARKS.md, "A probe to
+//! choose the renders' model") — hence off by default.
 
 use std::path::{Path, PathBuf};
 
 use gems_gpu::Engine;
-use gems_train::{InitMode, TrainConfig, Trainer, prepare_input};
+use gems_train::{
+    CHECKPOINT_JSON, CHECKPOINT_TENSORS, InitMode, TrainConfig, Trainer, prepare_input,
+    save_checkpoint,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::PipelineError;
@@ -101,14 +106,18 @@ pub fn probe_score(losses: &[f32]) -> f64 {
     tail.iter().map(|&l| f64::from(l)).sum::<f64>() / tail.len() as f64
 }
 
-/// Trains from `mode` with `cfg` (a fresh trainer: nothing is read from or written to disk) for
-/// `steps` steps on `engine`, and returns the probe's [`probe_score`] and the engine.
+/// Trains from `mode` with `cfg` — the configuration of the run proper this candidate would
+/// have — for `steps` steps on `engine`, saves the trainer's checkpoint into `checkpoint` (a
+/// folder, created if missing), and returns the probe's [`probe_score`] and the engine. The
+/// checkpoint is exactly the run proper's state after `steps` steps, so the kept candidate's run
+/// proper continues from it ([`continue_from`]) and only the other probe's steps are extra.
 pub fn probe(
     scene: &gems_data::Scene,
     mode: &InitMode,
     cfg: &TrainConfig,
     steps: usize,
     engine: Engine,
+    checkpoint: &Path,
 ) -> Result<(f64, Engine), PipelineError> {
     let input = prepare_input(scene, mode, cfg)?;
     let mut trainer = Trainer::new(cfg.clone(), input)?;
@@ -117,8 +126,38 @@ pub fn probe(
     for _ in 0..steps.min(cfg.steps) {
         losses.push(trainer.step()?.photometric_loss);
     }
+    trainer.sync()?;
+    std::fs::create_dir_all(checkpoint).map_err(|source| PipelineError::CreateDir {
+        path: checkpoint.to_path_buf(),
+        source,
+    })?;
+    save_checkpoint(checkpoint, &trainer)?;
     let engine = trainer.set_engine(Engine::cpu());
     Ok((probe_score(&losses), engine))
+}
+
+/// Moves the checkpoint a [`probe`] saved in `probe_dir` into `output` (replacing any there) and
+/// removes `probe_dir`: a run proper resumed from `output` then continues the probe.
+pub fn continue_from(probe_dir: &Path, output: &Path) -> Result<(), PipelineError> {
+    // Tensors first: a pair cut in between is refused by the step check when loading.
+    for name in [CHECKPOINT_TENSORS, CHECKPOINT_JSON] {
+        let from = probe_dir.join(name);
+        std::fs::rename(&from, output.join(name))
+            .map_err(|source| gems_fs::FsError { path: from, source })?;
+    }
+    remove_probe(probe_dir)
+}
+
+/// Removes a [`probe`]'s folder (nothing to do when it is absent).
+pub fn remove_probe(probe_dir: &Path) -> Result<(), PipelineError> {
+    match std::fs::remove_dir_all(probe_dir) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(gems_fs::FsError {
+            path: probe_dir.to_path_buf(),
+            source: e,
+        }
+        .into()),
+        _ => Ok(()),
+    }
 }
 
 #[cfg(test)]
@@ -150,6 +189,30 @@ mod tests {
             "{}",
             c.reason
         );
+    }
+
+    #[test]
+    fn a_probe_checkpoint_moves_into_the_output_and_its_folder_goes() {
+        let dir = tempfile::tempdir().unwrap();
+        let (probe_dir, output) = (dir.path().join("probe"), dir.path().join("run"));
+        std::fs::create_dir_all(&probe_dir).unwrap();
+        std::fs::create_dir_all(&output).unwrap();
+        std::fs::write(probe_dir.join(CHECKPOINT_TENSORS), b"tensors").unwrap();
+        std::fs::write(probe_dir.join(CHECKPOINT_JSON), b"json").unwrap();
+        std::fs::write(output.join(CHECKPOINT_JSON), b"an older run's").unwrap();
+        continue_from(&probe_dir, &output).unwrap();
+        assert_eq!(
+            std::fs::read(output.join(CHECKPOINT_TENSORS)).unwrap(),
+            b"tensors"
+        );
+        assert_eq!(
+            std::fs::read(output.join(CHECKPOINT_JSON)).unwrap(),
+            b"json"
+        );
+        assert!(!probe_dir.exists());
+        remove_probe(&probe_dir).unwrap();
+        let err = continue_from(&probe_dir, &output).unwrap_err();
+        assert!(err.to_string().contains("probe"), "{err}");
     }
 
     #[test]

@@ -16,7 +16,7 @@ use crate::init::{
     Init, InitRequest, init_images, place_missing_views, rerun_init_on_renders, reruns_on_renders,
     resolve_init,
 };
-use crate::probe::{RerunChoice, probe};
+use crate::probe::{RerunChoice, continue_from, probe, remove_probe};
 
 /// A whole run: a scene, where its initialisation comes from, and what to do after training.
 pub struct TrainRequest {
@@ -117,6 +117,8 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         &cfg,
         &engine,
     );
+    // The run proper continues the kept model's probe (its checkpoint is in the output folder).
+    let mut continues_probe = false;
     if let Some((first_steps, rest)) = cfg
         .sfm_rerun_split()
         .filter(|_| reruns_on_renders(init.init))
@@ -173,21 +175,42 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                     "the initialiser failed on the renders or left a trained view out".into(),
                 )
             } else if let Some(probe_steps) = cfg.sfm_rerun_probe_steps(rest) {
-                // Both candidates train alike: the run proper's schedule and seed, its own
-                // pose.straight_fraction, for the probe's steps.
-                let mut probe_cfg = cfg.clone();
-                probe_cfg.steps = rest;
-                probe_cfg.init.sfm_rerun_fraction = 0.0;
+                // Each candidate trains as its run proper would, and the kept one's run proper
+                // continues from its probe.
                 tracing::info!(
                     steps = probe_steps,
                     "probing the first model and the renders' model against the blurry photos"
                 );
-                let (first_loss, back) = probe(&scene, &mode, &probe_cfg, probe_steps, engine)?;
+                let first_probe = rerun.join("probe_first");
+                let renders_probe = rerun.join("probe_renders");
+                let (first_loss, back) = probe(
+                    &scene,
+                    &mode,
+                    &run_proper_config(&cfg, false, rest),
+                    probe_steps,
+                    engine,
+                    &first_probe,
+                )?;
                 let renders_mode = InitMode::Colmap(Some(renders_model.clone()));
-                let (renders_loss, back) =
-                    probe(&scene, &renders_mode, &probe_cfg, probe_steps, back)?;
+                let (renders_loss, back) = probe(
+                    &scene,
+                    &renders_mode,
+                    &run_proper_config(&cfg, true, rest),
+                    probe_steps,
+                    back,
+                    &renders_probe,
+                )?;
                 engine = back;
-                RerunChoice::from_probes(probe_steps, first_loss, renders_loss)
+                let choice = RerunChoice::from_probes(probe_steps, first_loss, renders_loss);
+                let (kept, other) = if choice.kept {
+                    (&renders_probe, &first_probe)
+                } else {
+                    (&first_probe, &renders_probe)
+                };
+                continue_from(kept, &req.output)?;
+                remove_probe(other)?;
+                continues_probe = true;
+                choice
             } else {
                 RerunChoice::without_probes(
                     true,
@@ -221,12 +244,8 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         };
         if keep_rerun {
             mode = InitMode::Colmap(Some(rerun.join("sparse").join("0")));
-            // The run proper has the steps the first pass left, and is itself one pass; its
-            // initial poses are now accurate enough for straight paths first.
-            cfg.steps = rest;
-            cfg.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
         }
-        cfg.init.sfm_rerun_fraction = 0.0;
+        cfg = run_proper_config(&cfg, keep_rerun, rest);
     }
     train_and_report(TrainJob {
         scene: &req.scene,
@@ -234,7 +253,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         mode,
         cfg,
         open: req.open,
-        resume: req.resume,
+        resume: req.resume || continues_probe,
         evaluate: req.evaluate,
         lpips: &req.lpips,
         engine,
@@ -242,6 +261,20 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         run: Some(description),
         started,
     })
+}
+
+/// The configuration of the run proper after a first pass, from the run's `cfg`: from the
+/// renders' model it has the `rest` of the steps and, its initial poses now accurate, straight
+/// paths first (`init.accurate_poses_straight_fraction`); from the first model it has all the
+/// steps and `cfg`'s own paths. Either is one pass.
+fn run_proper_config(cfg: &TrainConfig, renders_model: bool, rest: usize) -> TrainConfig {
+    let mut run = cfg.clone();
+    if renders_model {
+        run.steps = rest;
+        run.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
+    }
+    run.init.sfm_rerun_fraction = 0.0;
+    run
 }
 
 /// What a run on `scene` is, for its report and `metrics.json` ([`TrainJob::run`]); the wall

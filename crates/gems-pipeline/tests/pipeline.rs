@@ -226,8 +226,9 @@ fn the_probe_scores_exact_cameras_below_perturbed_ones() {
         seed: 5,
         ..TrainConfig::default()
     };
+    let checkpoint = dir.path().join("probe");
     let score = |mode: &gems_train::InitMode| {
-        gems_pipeline::probe::probe(&scene, mode, &cfg, 30, Engine::cpu())
+        gems_pipeline::probe::probe(&scene, mode, &cfg, 30, Engine::cpu(), &checkpoint)
             .unwrap()
             .0
     };
@@ -246,6 +247,11 @@ fn the_probe_scores_exact_cameras_below_perturbed_ones() {
         score(&gems_train::InitMode::Gt),
         "same seed, same score"
     );
+    // The probe's checkpoint is the state after its steps, in the configuration it ran with.
+    let (saved_cfg, state) = gems_train::load_checkpoint(&checkpoint).unwrap();
+    assert_eq!(state.step, 30);
+    assert_eq!(saved_cfg.steps, 100);
+    assert_eq!(state.history.loss.len(), 30);
 }
 
 #[test]
@@ -297,7 +303,15 @@ fn sfm_rerun_keeps_the_renders_model_only_as_its_probe_says() {
         "{}",
         run_description.init
     );
+    for probe in ["probe_first", "probe_renders"] {
+        assert!(
+            !out.join("sfm_rerun").join(probe).exists(),
+            "{probe}: the kept probe's checkpoint moved on, the other's was removed"
+        );
+    }
     // Resumed after the choice: the same choice and the same result, without probing again.
+    // Without a checkpoint the run proper trains from scratch, so the same result also says
+    // that continuing the kept model's probe is exact.
     let cloud = std::fs::read(&first.point_cloud).unwrap();
     for f in [
         "checkpoint.json",

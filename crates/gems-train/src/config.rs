@@ -220,18 +220,19 @@ pub struct InitConfig {
     /// render sharp enough images to help (measured from 1000 steps up).
     pub sfm_rerun_min_steps: usize,
     /// Before the run proper, both candidate models — the first one and the one initialised on
-    /// the first pass's renders — are trained alike, from scratch, for this fraction of the run
-    /// proper's steps (at least one), and the renders' model is kept only when its probe fits
-    /// the blurry photos better: a lower mean training loss over the probe's second half (same
-    /// configuration, seed and views; `sfm_rerun/choice.json` records both). The probes cost
-    /// twice this fraction of the run proper. Default 0 (off: the renders' model is kept
-    /// whenever it registers every trained view): at 0.1 the probe chose the first model on
-    /// Deblur-NeRF's real `blurball`, which gained +1.0 dB on the held-out views (refined) over
-    /// the renders' model, but also on `gems bench-quality`'s seed-5 scene, where the renders'
-    /// model was the better one (cameras 3.8 % against 5.8 % of the path extent) and the
-    /// choice cost 1.8 dB of refined deblurring and 3.2 dB of refined novel views: a 200-step
-    /// fit does not tell which model trains better (BENCHMARKS.md, "A probe to choose the
-    /// renders' model").
+    /// the first pass's renders — train as their run propers would (the first model with all the
+    /// steps, the renders' model with the rest and straight paths first; same seed and views),
+    /// from scratch, for this fraction of the run proper's steps (at least one), and the renders'
+    /// model is kept only when its probe fits the blurry photos better: a lower mean photometric
+    /// loss over the probe's second half (`sfm_rerun/choice.json` records both). The kept
+    /// model's run proper continues from its probe, so the probes cost this fraction of the
+    /// run proper once. Default 0 (off: the renders' model is kept whenever it registers every
+    /// trained view), because the choice depends on where the probe stops: on Deblur-NeRF's
+    /// real `blurball`, where the first model is the better one (+1.0 dB on the held-out views,
+    /// refined), and on `gems bench-quality`'s seed-5 scene, where the renders' model is (+1.8 dB
+    /// refined deblurring, +3.2 dB refined novel views), 200 probe steps chose the first model
+    /// on both, 400 chose right on both, 600 the renders' model on both (BENCHMARKS.md, "A
+    /// probe to choose the renders' model").
     pub sfm_rerun_probe_fraction: f32,
     /// `pose.straight_fraction` of a training whose initial poses are accurate: from ground-truth
     /// poses (`--init gt`), and the run proper after `sfm_rerun_fraction`, from the model made on
