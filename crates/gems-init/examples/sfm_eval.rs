@@ -40,6 +40,7 @@ fn main() {
     let mut refine: Option<f64> = None;
     let mut refine_patch: Option<f64> = None;
     let mut initial_pairs: Option<usize> = None;
+    let mut trim: Option<f64> = None;
     let mut it = args[1..].iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -74,6 +75,7 @@ fn main() {
             "--refine-max-blur" => refine = Some(it.next().unwrap().parse().unwrap()),
             "--refine-patch" => refine_patch = Some(it.next().unwrap().parse().unwrap()),
             "--initial-pairs" => initial_pairs = Some(it.next().unwrap().parse().unwrap()),
+            "--trim" => trim = Some(it.next().unwrap().parse().unwrap()),
             s => panic!("unknown argument {s}"),
         }
     }
@@ -110,6 +112,9 @@ fn main() {
     }
     if let Some(r) = refine_patch {
         opts.refine_patch_blur_ratio = r;
+    }
+    if let Some(f) = trim {
+        opts.trim_fraction = f;
     }
     if let Some(n) = initial_pairs {
         opts.initial_pairs = n;
@@ -206,7 +211,7 @@ fn main() {
         angle(last.1 * first.1.transpose()).to_degrees()
     );
     println!(
-        "{}: registered {}/{}, points {}, rmse/extent {:.4} (rmse {:.4}, extent {:.3}), rel. rot err {:.2}°, focal {:.1} (gt {:.1}, err {:+.1} %), reproj {:.2}px, {:.1}s (features {:.1}s), blur est {:.1}px, working size {} (final {}), unregistered {:?}",
+        "{}: registered {}/{}, points {}, rmse/extent {:.5} (rmse {:.4}, extent {:.3}), rel. rot err {:.2}°, focal {:.1} (gt {:.1}, err {:+.1} %), reproj {:.2}px, {:.1}s (features {:.1}s), blur est {:.1}px, working size {} (final {}), unregistered {:?}",
         dir.display(),
         r.stats.registered,
         r.stats.total,

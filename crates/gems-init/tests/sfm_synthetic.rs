@@ -307,6 +307,14 @@ fn bad_tracking_density_is_a_clear_error() {
             initial_pairs: 0,
             ..SfmOptions::default()
         },
+        SfmOptions {
+            trim_fraction: 1.0,
+            ..SfmOptions::default()
+        },
+        SfmOptions {
+            trim_fraction: f64::NAN,
+            ..SfmOptions::default()
+        },
     ] {
         let e = run_sfm(&s.images, &opts).unwrap_err();
         assert!(matches!(e, SfmError::InvalidOption(_)), "{e}");
