@@ -69,7 +69,9 @@ pub struct Args {
     pub initial_pairs: Option<usize>,
     /// Leave this fraction of the points, those the model fits worst, out of a last bundle
     /// adjustment of the cameras, then fit them to the new cameras (default: 0.4; 0 turns it
-    /// off). On nearly sharp photos the worst-fitting points are biased, not noisy.
+    /// off). Only photos whose estimated blur is at most 10 % of their long side: on nearly
+    /// sharp photos the worst-fitting points are biased, not noisy; under heavier blur every
+    /// track is.
     #[arg(long)]
     pub trim_fraction: Option<f64>,
     /// RANSAC seed.

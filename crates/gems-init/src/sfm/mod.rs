@@ -143,12 +143,18 @@ pub struct SfmOptions {
     /// (crates/gems-init/BENCHMARKS.md, "Several initial pairs"); 1 grows one model.
     pub initial_pairs: usize,
     /// Fraction of the points, those with the largest RMS reprojection error, left out of a
-    /// last bundle adjustment of the cameras (then re-fitted to them and kept when they fit).
-    /// 0 turns it off. Default 0.4: on generated scenes at blur levels 1–7 centre errors fell by
-    /// 9–57 % (level 1: 0.115 → 0.049 % of the path extent), at levels 9–11 they rose by 1 and
-    /// 3.5 %; blurball 0.81 → 0.78 % (crates/gems-init/BENCHMARKS.md, "Cameras adjusted on the
-    /// best-measured points").
+    /// last bundle adjustment of the cameras (then re-fitted to them and kept when they fit),
+    /// when the photos' estimated blur is at most `trim_max_blur` of their long side. 0 turns
+    /// it off. Default 0.4: on generated scenes at blur levels 1–7 centre errors fell by 9–57 %
+    /// (level 1: 0.115 → 0.049 % of the path extent); blurball 0.81 → 0.78 %
+    /// (crates/gems-init/BENCHMARKS.md, "Cameras adjusted on the best-measured points").
     pub trim_fraction: f64,
+    /// The largest estimated blur, as a fraction of the photos' long side, at which
+    /// `trim_fraction` applies. Default 0.1: under heavier blur the smear biases every track,
+    /// not a minority, and trimming made the cameras 1–3.5 % worse at levels 9–11 (10.8 and
+    /// 12.9 % of the long side) and a `gems bench-quality` scene (14.5 %) trained 0.4 dB worse
+    /// refined from its better cameras (same section).
+    pub trim_max_blur: f64,
     /// Seed of every random choice (RANSAC); same seed, same result.
     pub seed: u64,
 }
@@ -196,6 +202,7 @@ impl Default for SfmOptions {
             refine_patch_blur_ratio: 0.75,
             initial_pairs: 3,
             trim_fraction: 0.4,
+            trim_max_blur: 0.1,
             seed: 0,
         }
     }
@@ -610,7 +617,9 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         }
     }
     // Last, so that no adjustment on every point follows it.
-    if let Some(gauge) = rec.poses.iter().position(Option::is_some) {
+    if let Some(gauge) = rec.poses.iter().position(Option::is_some)
+        && trims(blur, long, opts)
+    {
         incremental::trimmed_ba(&mut rec, gauge, opts.trim_fraction, opts);
     }
     let mut result = output::assemble(images, &rec, scale, opts.focal_px.is_some(), ws);
@@ -635,6 +644,12 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         });
     }
     Ok(result)
+}
+
+/// Whether the last bundle adjustment leaves the worst-fitting points out: photos whose
+/// estimated `blur` (px) is at most [`SfmOptions::trim_max_blur`] of their `long` side.
+fn trims(blur: f64, long: f64, opts: &SfmOptions) -> bool {
+    opts.trim_fraction > 0.0 && blur <= opts.trim_max_blur * long
 }
 
 /// The median motion-blur length (px at full size) and the working sizes in the order to try:
@@ -833,6 +848,12 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
         return Err(SfmError::InvalidOption(
             "max_features ≥ 16 and max_reproj_px > 0 required".into(),
         ));
+    }
+    if opts.trim_max_blur.is_nan() || opts.trim_max_blur < 0.0 {
+        return Err(SfmError::InvalidOption(format!(
+            "trim_max_blur must be ≥ 0, got {}",
+            opts.trim_max_blur
+        )));
     }
     if !(0.0..1.0).contains(&opts.trim_fraction) {
         return Err(SfmError::InvalidOption(format!(
@@ -1242,6 +1263,19 @@ mod tests {
             error_px,
             focal_start_px: f,
         }
+    }
+
+    #[test]
+    fn only_photos_with_moderate_blur_are_trimmed() {
+        let opts = SfmOptions::default();
+        assert!(trims(0.0, 240.0, &opts));
+        assert!(trims(24.0, 240.0, &opts), "10 % of the long side");
+        assert!(!trims(26.0, 240.0, &opts));
+        let off = SfmOptions {
+            trim_fraction: 0.0,
+            ..SfmOptions::default()
+        };
+        assert!(!trims(0.0, 240.0, &off));
     }
 
     #[test]
