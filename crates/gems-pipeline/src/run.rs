@@ -181,34 +181,24 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                     steps = probe_steps,
                     "probing the first model and the renders' model against the blurry photos"
                 );
-                let first_probe = rerun.join("probe_first");
-                let renders_probe = rerun.join("probe_renders");
-                let (first_loss, back) = probe(
-                    &scene,
-                    &mode,
-                    &run_proper_config(&cfg, false, rest),
-                    probe_steps,
-                    engine,
-                    &first_probe,
-                )?;
-                let renders_mode = InitMode::Colmap(Some(renders_model.clone()));
-                let (renders_loss, back) = probe(
-                    &scene,
-                    &renders_mode,
-                    &run_proper_config(&cfg, true, rest),
-                    probe_steps,
-                    back,
-                    &renders_probe,
-                )?;
-                engine = back;
-                let choice = RerunChoice::from_probes(probe_steps, first_loss, renders_loss);
-                let (kept, other) = if choice.kept {
-                    (&renders_probe, &first_probe)
-                } else {
-                    (&first_probe, &renders_probe)
-                };
-                continue_from(kept, &req.output)?;
-                remove_probe(other)?;
+                // The first model, then the renders' model.
+                let candidates = [
+                    (false, mode.clone(), rerun.join("probe_first")),
+                    (
+                        true,
+                        InitMode::Colmap(Some(renders_model.clone())),
+                        rerun.join("probe_renders"),
+                    ),
+                ];
+                let mut losses = [0.0; 2];
+                for ((renders, candidate, dir), loss) in candidates.iter().zip(&mut losses) {
+                    let cfg = run_proper_config(&cfg, *renders, rest);
+                    (*loss, engine) = probe(&scene, candidate, &cfg, probe_steps, engine, dir)?;
+                }
+                let choice = RerunChoice::from_probes(probe_steps, losses[0], losses[1]);
+                let kept = usize::from(choice.kept);
+                continue_from(&candidates[kept].2, &req.output)?;
+                remove_probe(&candidates[1 - kept].2)?;
                 continues_probe = true;
                 choice
             } else {

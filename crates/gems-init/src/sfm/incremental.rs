@@ -281,13 +281,15 @@ fn adjust(
 /// A final bundle adjustment of the cameras on the best-measured points only, the focal held:
 /// the `fraction` of points with the largest RMS reprojection error sit out while the cameras
 /// move (the gauge view `fixed_view` held), then are re-fitted to the new cameras (the cameras
-/// held) and filtered like every point. (Refining a focal under its prior here too would weigh
-/// the prior more against fewer points: on a generated scene with a focal given 4 % low it
-/// pulled the estimate back toward the given value.) On nearly sharp generated scenes the points a model fits worst
-/// are biased rather than noisy (patches across depth edges): a bundle adjustment started from
-/// the true cameras ends as far from them as the model, and adjusting without those points
-/// brings the cameras closer (crates/gems-init/BENCHMARKS.md, "Cameras adjusted on the
-/// best-measured points").
+/// held) and filtered like every point.
+///
+/// On nearly sharp generated scenes the points a model fits worst are biased rather than noisy
+/// (patches across depth edges): a bundle adjustment started from the true cameras ends as far
+/// from them as the model, and adjusting without those points brings the cameras closer. The
+/// focal is held because refining one under its prior here would weigh the prior more against
+/// fewer points (on a generated scene with a focal given 4 % low it pulled the estimate back
+/// toward the given value); crates/gems-init/BENCHMARKS.md, "Cameras adjusted on the
+/// best-measured points".
 pub(crate) fn trimmed_ba(r: &mut Recon, fixed_view: usize, fraction: f64, opts: &SfmOptions) {
     let k = r.k;
     let mut rms: Vec<(f64, usize)> = Vec::new();
@@ -309,7 +311,7 @@ pub(crate) fn trimmed_ba(r: &mut Recon, fixed_view: usize, fraction: f64, opts: 
             rms.push(((sum / n as f64).sqrt(), ti));
         }
     }
-    let sit_out = (fraction.clamp(0.0, 1.0) * rms.len() as f64).floor() as usize;
+    let sit_out = (fraction * rms.len() as f64).floor() as usize;
     if sit_out == 0 || sit_out >= rms.len() {
         return;
     }
