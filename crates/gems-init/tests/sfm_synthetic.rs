@@ -25,8 +25,8 @@ fn synth_levels() -> &'static std::path::Path {
 }
 
 /// Sim(3)-aligned translation RMSE over the camera-path extent must stay below `tol` with every
-/// view registered and the focal estimated to within 25 %.
-fn check_level(level: usize, tol: f64, focal_from_metadata: bool) {
+/// view registered and the focal within `focal_tol` (relative) of the truth.
+fn check_level(level: usize, tol: f64, focal_from_metadata: bool, focal_tol: f64) {
     let ld = synth_levels().join(format!("s/blur_{level:02}"));
     let rows = gems_data::llff::read_poses_bounds(&ld.join("poses_bounds.npy")).unwrap();
     let gt: Vec<gems_math::Se3> = rows.iter().map(|r| r.pose().into()).collect();
@@ -57,7 +57,7 @@ fn check_level(level: usize, tol: f64, focal_from_metadata: bool) {
         "level {level}: translation RMSE fraction {err} ≥ {tol}"
     );
     assert!(
-        (r.camera.focal / rows[0].focal() - 1.0).abs() < 0.25,
+        (r.camera.focal / rows[0].focal() - 1.0).abs() < focal_tol,
         "focal {} vs {}",
         r.camera.focal,
         rows[0].focal()
@@ -136,14 +136,16 @@ fn capture_order_is_detected_and_shuffled_photos_are_not_taken_as_one() {
     assert!(!default.stats.capture_order, "off unless asked for");
 }
 
+/// Sharp photos, focal unknown: estimated to within 1.5 %, which takes its last refinement on
+/// the final level's observations (measured: +1.9 % without it, −1.1 % with it).
 #[test]
 fn poses_align_to_ground_truth_sharp() {
-    check_level(1, 0.01, false);
+    check_level(1, 0.01, false, 0.015);
 }
 
 #[test]
 fn poses_align_to_ground_truth_blur_level_7() {
-    check_level(7, 0.025, true);
+    check_level(7, 0.025, true, 0.25);
 }
 
 /// Level 11 (the full 30 px burst, 12.5 % of the width): every view must still register (before
@@ -151,7 +153,7 @@ fn poses_align_to_ground_truth_blur_level_7() {
 /// did), with the path within 12 % of its extent (measured: 9.3 %; a bent path is 15–30 %).
 #[test]
 fn every_view_registers_at_blur_level_11() {
-    check_level(11, 0.12, true);
+    check_level(11, 0.12, true, 0.25);
 }
 
 /// Our own harsher scene (busy texture, blur along random directions): level 1 must be exact

@@ -26,7 +26,8 @@
 //! 6. coarse to fine: the model is re-measured and bundle-adjusted at the finest level where the
 //!    estimated blur is at most [`SfmOptions::refine_max_blur_px`], then once more there; each
 //!    template is warped into the other view by the model's local surface map, with patches
-//!    sized to the blur ([`SfmOptions::refine_patch_blur_ratio`]); with
+//!    sized to the blur ([`SfmOptions::refine_patch_blur_ratio`]); an estimated focal is
+//!    refined once more there, anywhere within the candidates' span; with
 //!    [`SfmOptions::capture_order`], every bundle adjustment also holds the camera path smooth;
 //! 7. a last bundle adjustment moves the cameras on the best-measured points only, the
 //!    [`SfmOptions::trim_fraction`] that fit worst sitting out and then re-fitted to them.
@@ -598,6 +599,19 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         match refine::remeasure(&rec, &grays, scale, scale, blur, opts) {
             Some(r) => rec = r,
             None => tracing::info!("re-measuring left a view with too few observations; kept"),
+        }
+    }
+    if opts.focal_px.is_none() {
+        // Once more on the finest level's observations, anywhere within the candidates' span:
+        // the working level's bracket held it where the coarse tracks, nearly flat in the focal
+        // under blur, had put it (crates/gems-init/BENCHMARKS.md, "The estimated focal refined
+        // after coarse to fine").
+        let c = &opts.focal_candidates;
+        let lo = c.iter().copied().fold(f64::INFINITY, f64::min) * long * scale;
+        let hi = c.iter().copied().fold(0.0, f64::max) * long * scale;
+        if let Some(r) = incremental::refine_focal_bounded(&rec, lo, hi, opts) {
+            tracing::info!(focal = r.k.fx / scale, "focal refined at the final level");
+            rec = r;
         }
     }
     if let (Some(f), Some(rel)) = (opts.focal_px, opts.focal_prior) {
