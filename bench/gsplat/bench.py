@@ -105,7 +105,7 @@ class Scene:
 
 
 def render(rasterize, s, means, quats, log_scales, opacity_logits, sh, viewmats, packed):
-    colors, _alphas, _meta = rasterize(
+    colors, alphas, _meta = rasterize(
         means=means,
         quats=quats,
         scales=torch.exp(log_scales),
@@ -117,9 +117,11 @@ def render(rasterize, s, means, quats, log_scales, opacity_logits, sh, viewmats,
         height=s.height,
         sh_degree=s.sh_degree,
         packed=packed,
-        backgrounds=s.backgrounds,
     )
-    return colors  # [C, H, W, 3]
+    # The background is composited here, as gsplat's rasterizer does it (colour + (1 - alpha) *
+    # background): gsplat 1.5.3's packed path rejects per-camera backgrounds of shape [C, 3]
+    # (the assertion in cuda/_wrapper.py's rasterize_to_pixels), so both modes take this route.
+    return colors + (1.0 - alphas) * s.backgrounds[:, None, None, :]  # [C, H, W, 3]
 
 
 def bench_size(rasterize, s, packed, warmup, iters):
