@@ -30,6 +30,9 @@ end=$(date +%s.%N)
 kill "$sampler"
 
 cp "$work/run/gems.log" "$out/"
+# With TRAIN_ARGS=--gpu-profile: where each training pass's step time went, per kernel.
+[[ -f "$work/run/gpu_profile.txt" ]] && cp "$work/run/gpu_profile.txt" "$out/"
+[[ -f "$work/run/first_pass/gpu_profile.txt" ]] && cp "$work/run/first_pass/gpu_profile.txt" "$out/gpu_profile_first_pass.txt"
 cp "$work/run/metrics.json" "$out/" || true
 python3 - "$out" "$work" "$before" "$start" "$end" <<'PY' | tee "$out/schedule.md"
 import datetime, json, sys

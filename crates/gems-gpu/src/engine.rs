@@ -49,6 +49,28 @@ impl Engine {
         })
     }
 
+    /// The same engine with every GPU kernel timed ([`GpuContext::with_profiler`]); the CPU
+    /// engine and adapters that cannot time compute passes are an error.
+    pub fn profiled(self) -> Result<Self, GpuError> {
+        match self {
+            Engine::Cpu(_) => Err(GpuError::Operation(
+                "GPU profiling needs the GPU engine (--device gpu)".into(),
+            )),
+            Engine::Gpu(r) => Ok(Engine::Gpu(Box::new(GpuRenderer::new(
+                &r.context().with_profiler()?,
+            )))),
+        }
+    }
+
+    /// The GPU time of each kernel since the previous call (waits for the GPU); `None` unless
+    /// the engine is [`Engine::profiled`].
+    pub fn kernel_times(&self) -> Option<Result<crate::KernelTimes, GpuError>> {
+        match self {
+            Engine::Cpu(_) => None,
+            Engine::Gpu(r) => r.context().kernel_times(),
+        }
+    }
+
     /// What runs the renders, for the user: "CPU" or the GPU adapter.
     pub fn describe(&self) -> String {
         match self {

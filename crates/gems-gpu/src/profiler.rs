@@ -40,6 +40,21 @@ impl KernelTimes {
         self.kernels.iter().map(|k| k.seconds).sum()
     }
 
+    /// Adds `other`'s dispatches and times to this one's, kernel by kernel (a kernel new here
+    /// is appended, so the order stays that in which each first ran).
+    pub fn accumulate(&mut self, other: &KernelTimes) {
+        for k in &other.kernels {
+            match self.kernels.iter_mut().find(|m| m.kernel == k.kernel) {
+                Some(m) => {
+                    m.dispatches += k.dispatches;
+                    m.seconds += k.seconds;
+                }
+                None => self.kernels.push(k.clone()),
+            }
+        }
+        self.untimed_passes += other.untimed_passes;
+    }
+
     /// A plain-text table, slowest kernel first, with each one's share of the total.
     pub fn table(&self) -> String {
         let total = self.total_seconds().max(f64::MIN_POSITIVE);

@@ -41,5 +41,6 @@ pub use init::{
 };
 pub use protocol::{Headline, Protocol, ProtocolSettings};
 pub use run::{
-    RunOutcome, TrainJob, TrainRequest, attach_edi, describe_run, train_and_report, train_scene,
+    GPU_PROFILE, RunOutcome, TrainJob, TrainRequest, attach_edi, describe_run, train_and_report,
+    train_scene,
 };

@@ -18,6 +18,10 @@ use crate::init::{
 };
 use crate::probe::{RerunChoice, continue_from, probe, remove_probe};
 
+/// The file a training pass on a [profiled](gems_gpu::Engine::profiled) engine writes into its
+/// output folder: where its steps' time went, per kernel ([`gems_train::GpuProfile::report`]).
+pub const GPU_PROFILE: &str = "gpu_profile.txt";
+
 /// A whole run: a scene, where its initialisation comes from, and what to do after training.
 pub struct TrainRequest {
     /// Scene folder (any layout gems-data reads).
@@ -463,6 +467,12 @@ fn train_and_export(
     )?;
     let start = Instant::now();
     train_with_checkpoints(&mut trainer, job.output, job.progress)?;
+    if let Some(profile) = trainer.gpu_profile() {
+        let report = profile.report();
+        let path = job.output.join(GPU_PROFILE);
+        gems_fs::write_atomic(&path, report.as_bytes())?;
+        tracing::info!(path = %path.display(), "where the GPU steps' time went:\n{report}");
+    }
     let mut output = TrainOutput::from_trainer(&trainer);
     output.pose_model = pose_model;
     output.run = job.run.clone().map(|mut run| {

@@ -56,7 +56,9 @@ pub use init::{PointCloud, from_points, random_in_frustums};
 pub use normalize::Normalization;
 pub use output::{MODEL_JSON, MODEL_TENSORS, RunDescription, TrainOutput, ViewResult};
 pub use prepare::{InitMode, prepare_input};
-pub use trainer::{History, StepReport, TrainInput, TrainState, TrainView, Trainer, trajectory_of};
+pub use trainer::{
+    GpuProfile, History, StepReport, TrainInput, TrainState, TrainView, Trainer, trajectory_of,
+};
 
 use std::path::{Path, PathBuf};
 

@@ -154,6 +154,36 @@ struct Resident {
     host_current: bool,
 }
 
+/// Where a GPU training run's steps spent their time ([`Trainer::gpu_profile`]): the steps'
+/// wall clock against the GPU time of every kernel they ran. The gap is the host's work
+/// (encoding, uploads, read-backs, the CPU's share of a step) and the GPU waiting for it.
+#[derive(Clone, Debug, Default)]
+pub struct GpuProfile {
+    /// Steps profiled.
+    pub steps: usize,
+    /// Their summed wall-clock time, seconds.
+    pub step_seconds: f64,
+    /// Their kernels' GPU time, summed per kernel.
+    pub kernels: gems_gpu::KernelTimes,
+}
+
+impl GpuProfile {
+    /// A plain-text report: per step, the wall clock, the kernels' GPU time and the gap; then
+    /// the kernels' table (slowest first) over all the steps.
+    pub fn report(&self) -> String {
+        let n = self.steps.max(1) as f64;
+        let wall = 1e3 * self.step_seconds / n;
+        let gpu = 1e3 * self.kernels.total_seconds() / n;
+        format!(
+            "{} steps: {wall:.3} ms a step on the wall clock, {gpu:.3} ms of it in GPU kernels, \
+             {:.3} ms host work and idle GPU\n\n{}",
+            self.steps,
+            wall - gpu,
+            self.kernels.table()
+        )
+    }
+}
+
 /// The trainer: configuration, data and state, plus reusable buffers.
 pub struct Trainer {
     pub(crate) cfg: TrainConfig,
@@ -167,6 +197,8 @@ pub struct Trainer {
     pub(crate) state: TrainState,
     renderer: Engine,
     resident: Option<Resident>,
+    /// Where the steps' time went, while the engine is [`Engine::profiled`].
+    gpu_profile: Option<GpuProfile>,
     rng: ChaCha8Rng,
     losses: Vec<((u32, u32), TrainingLoss)>,
     ws: BlurWorkspace,
@@ -373,6 +405,7 @@ impl Trainer {
             state,
             renderer: Engine::cpu(),
             resident: None,
+            gpu_profile: None,
             losses: Vec::new(),
             ws: BlurWorkspace::default(),
             d_blurred: Vec::new(),
@@ -384,8 +417,18 @@ impl Trainer {
     /// one. The engine is not part of the checkpointed state: a run may resume on another.
     /// State resident on a previous GPU stays there until the next step or [`Trainer::sync`],
     /// which move it to where the new engine needs it.
+    ///
+    /// A [profiled](Engine::profiled) engine makes the trainer sum every step's kernel times
+    /// into [`Trainer::gpu_profile`], from this call on (what the engine ran before is dropped).
     pub fn set_engine(&mut self, engine: Engine) -> Engine {
+        self.gpu_profile = engine.kernel_times().map(|_| GpuProfile::default());
         std::mem::replace(&mut self.renderer, engine)
+    }
+
+    /// Where the steps since [`Trainer::set_engine`] spent their time, when the engine is
+    /// [profiled](Engine::profiled).
+    pub fn gpu_profile(&self) -> Option<&GpuProfile> {
+        self.gpu_profile.as_ref()
     }
 
     /// Downloads the resident Gaussians and Adam moments into `state` when the host copy is
@@ -634,7 +677,24 @@ impl Trainer {
                 self.sync()?;
             }
         }
-        self.state.seconds += start.elapsed().as_secs_f64();
+        if self.gpu_profile.is_some()
+            && let Engine::Gpu(r) = &self.renderer
+        {
+            // Profiled, a step's wall clock covers its last kernel (the SGLD noise runs after
+            // the last read-back), so that its kernels' time is part of it.
+            gems_gpu::buffers::wait_idle(r.context())?;
+        }
+        let seconds = start.elapsed().as_secs_f64();
+        self.state.seconds += seconds;
+        if let Some(profile) = &mut self.gpu_profile
+            && let Some(times) = self.renderer.kernel_times()
+        {
+            // After the wall clock stopped: reading the timestamps costs a submission and a
+            // read-back that are no part of the step.
+            profile.steps += 1;
+            profile.step_seconds += seconds;
+            profile.kernels.accumulate(&times?);
+        }
         Ok(StepReport {
             step: self.state.step,
             loss,

@@ -202,6 +202,60 @@ fn resident_gpu_resume_is_bit_identical() {
     assert_eq!(sa.adam, d.state().unwrap().adam);
 }
 
+/// `gems train --gpu-profile`: a profiled engine times every kernel of every step and changes
+/// no bit of the run; the profile counts each step once, one forward and one backward
+/// rasterization per step, and Adam for the five parameter groups.
+#[test]
+fn profiled_training_counts_every_step_and_changes_no_bit() {
+    let mut cfg = config(3);
+    cfg.steps = 12;
+    let mut plain = trainer(&cfg, gpu());
+    assert!(plain.gpu_profile().is_none(), "no profile unless asked");
+    plain.run(|_, _| Ok(())).unwrap();
+    let mut profiled = trainer(&cfg, gpu().profiled().unwrap());
+    profiled.run(|_, _| Ok(())).unwrap();
+    let bits = |t: &mut Trainer| -> Vec<u32> {
+        let g = &t.state().unwrap().gaussians;
+        let mut v: Vec<f32> = Vec::new();
+        v.extend(g.means.iter().flatten());
+        v.extend(g.log_scales.iter().flatten());
+        v.extend(&g.opacity_logits);
+        v.extend(g.sh.iter().flatten().flatten());
+        v.into_iter().map(f32::to_bits).collect()
+    };
+    assert_eq!(bits(&mut plain), bits(&mut profiled));
+    assert_eq!(
+        plain.state().unwrap().history,
+        profiled.state().unwrap().history
+    );
+    let p = profiled.gpu_profile().expect("a profile");
+    assert_eq!(p.steps, cfg.steps);
+    assert!(p.step_seconds > 0.0);
+    let count = |name: &str| {
+        p.kernels
+            .kernels
+            .iter()
+            .find(|k| k.kernel == name)
+            .map_or(0, |k| k.dispatches)
+    };
+    assert_eq!(count("rasterize_forward"), cfg.steps as u32);
+    assert_eq!(count("adam_update"), 5 * cfg.steps as u32);
+    let gpu = p.kernels.total_seconds();
+    assert!(
+        gpu > 0.0 && gpu <= p.step_seconds,
+        "{gpu} s of kernels in {} s",
+        p.step_seconds
+    );
+    assert_eq!(p.kernels.untimed_passes, 0);
+    let report = p.report();
+    assert!(report.starts_with("12 steps: "), "{report}");
+    assert!(report.contains("rasterize_forward"), "{report}");
+    assert!(
+        Engine::cpu().profiled().is_err(),
+        "the CPU engine has no kernels to time"
+    );
+}
+
 /// Per step only the virtual cameras' pose gradients (48 bytes each), the loss scalars (16 +
 /// 4 bytes) and one 4-byte intersection count per renderer call cross back to the CPU; the
 /// Gaussians (236 bytes each, plus their Adam moments) never do, except at the opacity round

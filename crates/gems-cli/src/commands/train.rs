@@ -5,6 +5,8 @@
 
 use std::path::PathBuf;
 
+use anyhow::Context;
+
 use gems_pipeline::Init;
 use gems_train::TrainConfig;
 
@@ -106,6 +108,12 @@ pub struct Args {
     /// when there is none; `cpu` the CPU.
     #[arg(long, default_value = "auto")]
     pub device: gems_gpu::DeviceChoice,
+    /// Time every GPU kernel of the training steps (GPU timestamps) and write where each
+    /// training pass's time went, per kernel and against the wall clock, to `gpu_profile.txt`
+    /// in its output folder. Needs a GPU that can time compute passes; each step then ends by
+    /// waiting for the GPU and reading its timestamps.
+    #[arg(long)]
+    pub gpu_profile: bool,
 }
 
 /// The protocol's settings with what the user gave explicitly put over them.
@@ -190,7 +198,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         resume: args.resume,
         evaluate: !args.no_eval,
         lpips: args.lpips,
-        engine: super::open_engine(args.device)?,
+        engine: if args.gpu_profile {
+            super::open_engine(args.device)?
+                .profiled()
+                .context("--gpu-profile")?
+        } else {
+            super::open_engine(args.device)?
+        },
         progress: true,
         protocol: args.protocol,
     })?;
