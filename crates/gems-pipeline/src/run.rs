@@ -467,8 +467,15 @@ fn train_and_export(
     )?;
     let start = Instant::now();
     train_with_checkpoints(&mut trainer, job.output, job.progress)?;
+    let memory = trainer.gpu_memory();
+    if let Some(m) = memory {
+        tracing::info!("GPU memory held by gems's buffers after training: {m}");
+    }
     if let Some(profile) = trainer.gpu_profile() {
-        let report = profile.report();
+        let mut report = profile.report();
+        if let Some(m) = memory {
+            report.push_str(&format!("\nGPU memory held by gems's buffers: {m}\n"));
+        }
         let path = job.output.join(GPU_PROFILE);
         gems_fs::write_atomic(&path, report.as_bytes())?;
         tracing::info!(path = %path.display(), "where the GPU steps' time went:\n{report}");

@@ -184,6 +184,32 @@ impl GpuProfile {
     }
 }
 
+/// GPU memory held by a trainer's buffers ([`Trainer::gpu_memory`]), bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GpuMemory {
+    /// The renderer's buffers (projection, sort, rasterization, gradients per entry).
+    pub renderer_bytes: u64,
+    /// The resident training state: Gaussians with their moments and gradients, the training
+    /// images, the losses' and the per-step buffers.
+    pub state_bytes: u64,
+    /// The training images, part of `state_bytes`.
+    pub image_bytes: u64,
+}
+
+impl std::fmt::Display for GpuMemory {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
+        write!(
+            f,
+            "{:.1} MiB: renderer {:.1} MiB, training state {:.1} MiB (of which images {:.1} MiB)",
+            mib(self.renderer_bytes + self.state_bytes),
+            mib(self.renderer_bytes),
+            mib(self.state_bytes),
+            mib(self.image_bytes)
+        )
+    }
+}
+
 /// The trainer: configuration, data and state, plus reusable buffers.
 pub struct Trainer {
     pub(crate) cfg: TrainConfig,
@@ -481,6 +507,22 @@ impl Trainer {
         self.resident
             .as_ref()
             .map_or(0, |r| r.step.bytes_read_back())
+    }
+
+    /// GPU memory held by gems's own buffers now, on the GPU engine (`None` on the CPU): the
+    /// renderer's (grown to its largest call and kept, so also their peak), the resident state's
+    /// (Gaussians, Adam moments, gradients, losses, per-step buffers) and, of those, the
+    /// training images'. The driver's figure for the process adds its context and allocator.
+    pub fn gpu_memory(&self) -> Option<GpuMemory> {
+        let Engine::Gpu(r) = &self.renderer else {
+            return None;
+        };
+        let state = self.resident.as_ref();
+        Some(GpuMemory {
+            renderer_bytes: r.allocated_bytes(),
+            state_bytes: state.map_or(0, |s| s.step.allocated_bytes()),
+            image_bytes: state.map_or(0, |s| s.step.image_bytes()),
+        })
     }
 
     /// Puts the Gaussians where the engine needs them: resident on its GPU, or in `state`.

@@ -204,7 +204,8 @@ fn resident_gpu_resume_is_bit_identical() {
 
 /// `gems train --gpu-profile`: a profiled engine times every kernel of every step and changes
 /// no bit of the run; the profile counts each step once, one forward and one backward
-/// rasterization per step, and Adam for the five parameter groups.
+/// rasterization per step, and Adam for the five parameter groups. Beside it the pipeline logs
+/// the GPU memory gems's buffers hold, whose training images must be each view's once.
 #[test]
 fn profiled_training_counts_every_step_and_changes_no_bit() {
     let mut cfg = config(3);
@@ -254,6 +255,24 @@ fn profiled_training_counts_every_step_and_changes_no_bit() {
         Engine::cpu().profiled().is_err(),
         "the CPU engine has no kernels to time"
     );
+    // What the pipeline logs beside the profile: the buffers gems holds on the GPU.
+    let m = profiled.gpu_memory().expect("GPU buffers");
+    let images: u64 = profiled
+        .views()
+        .iter()
+        .map(|v| v.image.len() as u64 * 4)
+        .sum();
+    assert_eq!(
+        m.image_bytes, images,
+        "every view's image, once, at full size"
+    );
+    assert!(
+        m.state_bytes > m.image_bytes && m.renderer_bytes > 0,
+        "{m:?}"
+    );
+    let mut cpu = trainer(&cfg, Engine::cpu());
+    cpu.step().unwrap();
+    assert!(cpu.gpu_memory().is_none());
 }
 
 /// Per step only the virtual cameras' pose gradients (48 bytes each), the loss scalars (16 +
