@@ -189,6 +189,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         focal_prior: None,
         colmap_binary: args.colmap_binary,
     };
+    let engine = super::open_engine(args.device)?;
+    let engine = if args.gpu_profile {
+        engine.profiled().context("--gpu-profile")?
+    } else {
+        engine
+    };
     let run = gems_pipeline::train_scene(gems_pipeline::TrainRequest {
         scene,
         output: args.output,
@@ -198,13 +204,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         resume: args.resume,
         evaluate: !args.no_eval,
         lpips: args.lpips,
-        engine: if args.gpu_profile {
-            super::open_engine(args.device)?
-                .profiled()
-                .context("--gpu-profile")?
-        } else {
-            super::open_engine(args.device)?
-        },
+        engine,
         progress: true,
         protocol: args.protocol,
     })?;
