@@ -445,6 +445,16 @@ pub fn load_images(dir: &std::path::Path) -> Result<Vec<SfmImage>, SfmError> {
         .collect()
 }
 
+/// Each photo's estimated motion-blur length in its own pixels (0 where no blur is found): the
+/// measure [`run_sfm`] orders its working sizes by and reports per photo
+/// ([`ViewReport::blur_px`]).
+pub fn estimate_blur_px(images: &[SfmImage]) -> Vec<f64> {
+    images
+        .par_iter()
+        .map(|im| f64::from(features::estimate_blur_px(&Gray::from_rgb(&im.image))))
+        .collect()
+}
+
 /// Validate the input and reconstruct. See the module docs for the pipeline.
 pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmError> {
     let t0 = Instant::now();
