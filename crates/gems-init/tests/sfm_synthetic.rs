@@ -139,8 +139,8 @@ fn capture_order_is_detected_and_shuffled_photos_are_not_taken_as_one() {
 /// Sharp photos, focal unknown: estimated to within 4 %, which takes its last refinement on
 /// the final level's observations (measured: +1.9 % without it, −1.1 % with it at a final
 /// level of 222 px, −3.4 % at the photos' own 240 px once the blur estimate stopped reading
-/// 13 px on these sharp photos; over ten held-out sharp scenes the mean error fell from 2.5 to
-/// 1.8 % with that change, crates/gems-init/BENCHMARKS.md).
+/// 13 px on these sharp photos; over eleven held-out sharp scenes the mean error fell from 2.3
+/// to 1.7 % with that change, crates/gems-init/BENCHMARKS.md).
 #[test]
 fn poses_align_to_ground_truth_sharp() {
     check_level(1, 0.01, false, 0.04);
