@@ -196,15 +196,15 @@ pub(crate) fn estimate_blur_px(img: &Gray) -> f32 {
             curve
         })
         .collect();
-    let by_zero = blur_lobe_by_zero_crossing(&curves, max_lag);
-    let near_decay = blur_lobe_near_decay(&curves, max_lag);
-    let lag = match (by_zero, near_decay) {
-        (_, Some(near)) if near.depth < by_zero.map_or(0.0, |z| z.depth) => near.lag,
-        (Some(zero), _) => zero.lag,
-        (None, Some(near)) => near.lag,
-        (None, None) => return 0.0,
-    };
-    lag as f32 / scale
+    // The deeper lobe; on a tie the first reading's.
+    [
+        blur_lobe_by_zero_crossing(&curves, max_lag),
+        blur_lobe_near_decay(&curves, max_lag),
+    ]
+    .into_iter()
+    .flatten()
+    .min_by(|a, b| a.depth.total_cmp(&b.depth))
+    .map_or(0.0, |lobe| lobe.lag as f32 / scale)
 }
 
 /// A negative lobe of one direction's derivative autocorrelation: where it is, how deep.
