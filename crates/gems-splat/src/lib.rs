@@ -102,6 +102,22 @@ impl Gaussians {
         self.means.is_empty()
     }
 
+    /// Every parameter's bit pattern (means, quaternions, log-scales, opacity logits, SH), for
+    /// bit-identity checks: comparing the f32 values would take 0.0 for −0.0.
+    pub fn parameter_bits(&self) -> Vec<u32> {
+        let means = self.means.iter().flatten();
+        let quats = self.quats.iter().flatten();
+        let scales = self.log_scales.iter().flatten();
+        let sh = self.sh.iter().flatten().flatten();
+        means
+            .chain(quats)
+            .chain(scales)
+            .chain(&self.opacity_logits)
+            .chain(sh)
+            .map(|x| x.to_bits())
+            .collect()
+    }
+
     /// Checks that all arrays have the same length and the SH degree is at most 3.
     pub fn validate(&self) -> Result<(), SplatError> {
         let n = self.means.len();

@@ -78,17 +78,6 @@ fn gpu() -> Engine {
     e
 }
 
-/// Every parameter of `g` as bits (f32 PartialEq would also accept 0.0 == -0.0).
-fn gaussian_bits(g: &gems_splat::Gaussians) -> Vec<u32> {
-    let mut v: Vec<f32> = Vec::new();
-    v.extend(g.means.iter().flatten());
-    v.extend(g.quats.iter().flatten());
-    v.extend(g.log_scales.iter().flatten());
-    v.extend(&g.opacity_logits);
-    v.extend(g.sh.iter().flatten().flatten());
-    v.into_iter().map(f32::to_bits).collect()
-}
-
 /// Mean PSNR of each view's synthesised blurry image (rendered on the CPU) against its input.
 fn fit_psnr(t: &mut Trainer) -> f32 {
     t.set_engine(Engine::cpu());
@@ -190,7 +179,7 @@ fn resident_gpu_resume_is_bit_identical() {
     assert!(a.is_synced() && c.is_synced(), "run ends synced");
     // Every parameter, moment, knot and curve, bit for bit.
     let (sa, sc) = (a.state().unwrap().clone(), c.state().unwrap().clone());
-    assert_eq!(gaussian_bits(&sa.gaussians), gaussian_bits(&sc.gaussians));
+    assert_eq!(sa.gaussians.parameter_bits(), sc.gaussians.parameter_bits());
     assert_eq!(sa.adam, sc.adam);
     assert_eq!(sa.knots, sc.knots);
     assert_eq!(sa.knot_adam, sc.knot_adam);
@@ -200,8 +189,8 @@ fn resident_gpu_resume_is_bit_identical() {
     let mut d = trainer(&cfg, gpu());
     d.run(|_, _| Ok(())).unwrap();
     assert_eq!(
-        gaussian_bits(&sa.gaussians),
-        gaussian_bits(&d.state().unwrap().gaussians)
+        sa.gaussians.parameter_bits(),
+        d.state().unwrap().gaussians.parameter_bits()
     );
     assert_eq!(sa.adam, d.state().unwrap().adam);
 }
@@ -219,10 +208,10 @@ fn profiled_training_counts_every_step_and_changes_no_bit() {
     plain.run(|_, _| Ok(())).unwrap();
     let mut profiled = trainer(&cfg, gpu().profiled().unwrap());
     profiled.run(|_, _| Ok(())).unwrap();
-    let plain_bits = gaussian_bits(&plain.state().unwrap().gaussians);
+    let plain_bits = plain.state().unwrap().gaussians.parameter_bits();
     assert_eq!(
         plain_bits,
-        gaussian_bits(&profiled.state().unwrap().gaussians)
+        profiled.state().unwrap().gaussians.parameter_bits()
     );
     assert_eq!(
         plain.state().unwrap().history,
