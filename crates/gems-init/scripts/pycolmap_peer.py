@@ -123,7 +123,7 @@ def run(scene, work, mapper, focal):
         return f"{scene}: COLMAP {pycolmap.__version__} {mapper}: no reconstruction ({seconds:.1f}s)"
     rec = max(recs.values(), key=lambda r: r.num_reg_images())
     registered, rmse, rot_err, focal_err = score(rec, names, centres, rotations, focal_ref)
-    rmse_text = "—" if rmse is None else f"{100 * rmse:.2f} %"
+    rmse_text = "—" if rmse is None else f"{100 * rmse:.3f} %"
     rot_text = "—" if rot_err is None else f"{rot_err:.2f}°"
     return (
         f"{scene}: COLMAP {pycolmap.__version__} {mapper}: registered {registered}/{len(names)}, "
