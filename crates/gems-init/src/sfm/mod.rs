@@ -21,8 +21,10 @@
 //!    reconstruction is made with each candidate of [`SfmOptions::focal_candidates`] held fixed
 //!    (a free focal drifts along its weak direction under blur). The one registering most views
 //!    wins; candidates whose mean errors are within 1 % of the best are ties (under blur the error
-//!    is nearly flat in the focal) decided by a 53° field-of-view prior; a final bundle
-//!    adjustment refines the focal inside the bracket of the neighbouring candidates;
+//!    is nearly flat in the focal) decided by a 53° field-of-view prior; when the list's first
+//!    or last candidate wins, candidates are added beyond it while they win
+//!    ([`SfmOptions::focal_search_span`]); a final bundle adjustment refines the focal inside
+//!    the bracket of the neighbouring candidates;
 //! 6. coarse to fine: the model is re-measured and bundle-adjusted at the finest level where the
 //!    estimated blur is at most [`SfmOptions::refine_max_blur_px`], then once more there; each
 //!    template is warped into the other view by the model's local surface map, with patches
@@ -85,7 +87,17 @@ pub struct SfmOptions {
     /// it under a Gaussian prior of that width. `None` keeps it fixed (a calibrated camera).
     pub focal_prior: Option<f64>,
     /// Candidate focal lengths as multiples of the long image side, used when `focal_px` is None.
+    /// When the chosen one is the first or the last, candidates are added beyond it, in the
+    /// list's own ratio at that end, while the added one is chosen, within
+    /// `focal_search_span`.
     pub focal_candidates: Vec<f64>,
+    /// How far, as multiples of the long image side, the focal candidates are extended beyond
+    /// the list's ends when an end candidate wins. Default 0.3–4.0 (fields of view of 118° to
+    /// 14° across the long side): the list's 0.6–1.7 (80° to 33°) left a 25° telephoto view
+    /// 25 % short of its focal and a 100° wide one 20–43 % long, and their cameras 5–25× less
+    /// precise than with the focal given (crates/gems-init/BENCHMARKS.md, "Focal lengths
+    /// outside the candidates"). The list's own ends: no extension.
+    pub focal_search_span: (f64, f64),
     /// Long side, in pixels, of the pyramid levels, tried nearest-first to the level where the
     /// estimated blur is about 10 px; the first that registers every view is kept, otherwise
     /// the best over all. A size above the images' own long side means the images themselves
@@ -180,6 +192,7 @@ impl Default for SfmOptions {
             focal_px: None,
             focal_prior: None,
             focal_candidates: vec![0.6, 0.75, 0.9, 1.1, 1.35, 1.7],
+            focal_search_span: (0.3, 4.0),
             // 256 and 384 for photos that are large and not very blurred: Deblur-NeRF's
             // blurball (2400 px, 100 px of blur) registers at 256 with 1.05 % of centre error
             // against the dataset's COLMAP model instead of 1.44 % at 192, and a nearly sharp
@@ -494,7 +507,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
             textureless = Some(textureless_views(images, &grays, &feats, long, opts)?);
         }
         let tr = Instant::now();
-        let focals: Vec<f64> = match opts.focal_px {
+        let mut focals: Vec<f64> = match opts.focal_px {
             Some(f) => vec![f * scale],
             None => opts
                 .focal_candidates
@@ -503,7 +516,10 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
                 .collect(),
         };
         let (sw, sh) = (w as f64 * scale, h as f64 * scale);
-        for f in focals {
+        let mut next = 0;
+        while next < focals.len() {
+            let f = focals[next];
+            next += 1;
             // One focal for both axes: the bundle adjustment refines fx = fy together.
             let k = gems_math::Intrinsics {
                 fx: f,
@@ -539,6 +555,12 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
                 "sfm attempt"
             );
             attempts.push(attempt);
+            if next == focals.len()
+                && opts.focal_px.is_none()
+                && let Some(f) = focal_beyond_the_candidates(&attempts, ws, long, opts)
+            {
+                focals.push(f * long * scale);
+            }
         }
         best = choose_attempt(&attempts, long).cloned();
         t_rec += tr.elapsed().as_secs_f64();
@@ -564,6 +586,13 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
     };
     // A given focal is held through the reconstruction; under a prior it is refined at the
     // end, on the finest observations (below).
+    // Every focal candidate tried at the kept level (the list and its extensions), as multiples
+    // of the long side.
+    let candidates: Vec<f64> = attempts
+        .iter()
+        .filter(|a| a.working_size == ws)
+        .map(|a| a.focal_start_px / long)
+        .collect();
     // The focal candidates that explain the tracks as well as the kept one, at its level.
     let tied: Vec<f64> = tied_attempts(&attempts)
         .into_iter()
@@ -571,7 +600,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         .map(|a| a.focal_start_px * scale)
         .collect();
     if opts.focal_px.is_none()
-        && let Some(r) = refine_focal_around(&rec, long * scale, &tied, opts)
+        && let Some(r) = refine_focal_around(&rec, long * scale, &candidates, &tied, opts)
     {
         tracing::info!(focal = r.k.fx / scale, "focal refined");
         rec = r;
@@ -616,9 +645,8 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         // the working level's bracket held it where the coarse tracks, nearly flat in the focal
         // under blur, had put it (crates/gems-init/BENCHMARKS.md, "The estimated focal refined
         // after coarse to fine").
-        let c = &opts.focal_candidates;
-        let lo = c.iter().copied().fold(f64::INFINITY, f64::min) * long * scale;
-        let hi = c.iter().copied().fold(0.0, f64::max) * long * scale;
+        let lo = candidates.iter().copied().fold(f64::INFINITY, f64::min) * long * scale;
+        let hi = candidates.iter().copied().fold(0.0, f64::max) * long * scale;
         if let Some(r) = incremental::refine_focal_bounded(&rec, lo, hi, opts) {
             tracing::info!(focal = r.k.fx / scale, "focal refined at the final level");
             rec = r;
@@ -756,11 +784,13 @@ fn textureless_views(
 /// them and the tie-break toward [`FOCAL_PRIOR`] is only a guess (on generated arcs at blur level
 /// 5 it picked 1.1× the long side for a focal of 0.87×, which the refinement then moved most of
 /// the way back; crates/gems-init/BENCHMARKS.md, "The focal refined across tied candidates");
-/// otherwise halfway (geometrically) to the neighbouring candidates of its own (`long_px`: the
-/// long image side at the working scale). `None` when the refinement does not improve it.
+/// otherwise halfway (geometrically) to the neighbouring candidates of its own (`candidates`,
+/// as multiples of `long_px`, the long image side at the working scale). `None` when the
+/// refinement does not improve it.
 fn refine_focal_around(
     rec: &incremental::Recon,
     long_px: f64,
+    candidates: &[f64],
     tied: &[f64],
     opts: &SfmOptions,
 ) -> Option<incremental::Recon> {
@@ -771,7 +801,7 @@ fn refine_focal_around(
         return incremental::refine_focal_bounded(rec, lo, hi, opts);
     }
     let f0 = rec.k.fx;
-    let mut c: Vec<f64> = opts.focal_candidates.iter().map(|c| c * long_px).collect();
+    let mut c: Vec<f64> = candidates.iter().map(|c| c * long_px).collect();
     c.sort_by(|a, b| a.total_cmp(b));
     let lo = c
         .iter()
@@ -783,6 +813,39 @@ fn refine_focal_around(
         .find(|&&x| x > f0 * 1.001)
         .map_or(f0 * 1.25, |x| (x * f0).sqrt());
     incremental::refine_focal_bounded(rec, lo, hi, opts)
+}
+
+/// The next focal candidate, as a multiple of the long side `long`, when the attempt chosen
+/// among those at working size `ws` started from the smallest or the largest focal tried
+/// there: one step beyond it in the ratio of the two candidates at that end, if that stays
+/// within [`SfmOptions::focal_search_span`]. A focal outside the list is then found by the
+/// same evidence as one inside it (the views registered and the reprojection error, ties
+/// broken toward [`FOCAL_PRIOR`]), and the search stops at the first added candidate that is
+/// not chosen.
+fn focal_beyond_the_candidates(
+    attempts: &[Attempt],
+    ws: u32,
+    long: f64,
+    opts: &SfmOptions,
+) -> Option<f64> {
+    let here = attempts.iter().filter(|a| a.working_size == ws);
+    let mut tried: Vec<f64> = here.clone().map(|a| a.focal_start_px / long).collect();
+    tried.sort_by(f64::total_cmp);
+    if tried.len() < 2 {
+        return None;
+    }
+    let chosen = choose_attempt(here, long)?.focal_start_px / long;
+    let (lo, hi) = opts.focal_search_span;
+    let n = tried.len();
+    if chosen >= tried[n - 1] * (1.0 - 1e-9) {
+        let up = tried[n - 1] * tried[n - 1] / tried[n - 2];
+        (up <= hi * (1.0 + 1e-9)).then_some(up)
+    } else if chosen <= tried[0] * (1.0 + 1e-9) {
+        let down = tried[0] * tried[0] / tried[1];
+        (down >= lo * (1.0 - 1e-9)).then_some(down)
+    } else {
+        None
+    }
 }
 
 /// One reconstruction attempt: a working size and a starting focal.
@@ -810,24 +873,33 @@ const FOCAL_PRIOR: f64 = 1.0;
 
 /// The attempts that are equally good: most registered views, and among those errors within
 /// [`FOCAL_ERROR_TIE`] of the smallest.
-fn tied_attempts(attempts: &[Attempt]) -> Vec<&Attempt> {
-    let Some(nreg) = attempts.iter().map(|a| a.recon.registered()).max() else {
+fn tied_attempts<'a>(attempts: impl IntoIterator<Item = &'a Attempt> + Clone) -> Vec<&'a Attempt> {
+    let Some(nreg) = attempts
+        .clone()
+        .into_iter()
+        .map(|a| a.recon.registered())
+        .max()
+    else {
         return Vec::new();
     };
     let min_err = attempts
-        .iter()
+        .clone()
+        .into_iter()
         .filter(|a| a.recon.registered() == nreg)
         .map(|a| a.error_px)
         .fold(f64::INFINITY, f64::min);
     attempts
-        .iter()
+        .into_iter()
         .filter(|a| a.recon.registered() == nreg && a.error_px <= min_err * (1.0 + FOCAL_ERROR_TIE))
         .collect()
 }
 
 /// The best attempt so far: of the [`tied_attempts`], the one whose starting focal is nearest
 /// [`FOCAL_PRIOR`].
-fn choose_attempt(attempts: &[Attempt], long: f64) -> Option<&Attempt> {
+fn choose_attempt<'a>(
+    attempts: impl IntoIterator<Item = &'a Attempt> + Clone,
+    long: f64,
+) -> Option<&'a Attempt> {
     let prior = FOCAL_PRIOR * long;
     let dist = |f: f64| (f / prior).ln().abs();
     tied_attempts(attempts).into_iter().min_by(|a, b| {
@@ -855,6 +927,12 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
     {
         return Err(SfmError::InvalidOption(
             "focal candidates must be positive and non-empty".into(),
+        ));
+    }
+    let (lo, hi) = opts.focal_search_span;
+    if !(lo > 0.0 && lo <= hi && hi.is_finite()) {
+        return Err(SfmError::InvalidOption(
+            "the focal search span must be positive and ordered".into(),
         ));
     }
     if opts
@@ -1320,6 +1398,54 @@ mod tests {
         let best = choose_attempt(&attempts, 256.0).expect("an attempt");
         assert_eq!(best.focal_start_px, 200.0);
         assert!(tied_attempts(&[]).is_empty());
+    }
+
+    /// The candidates grow beyond an end only while that end is the chosen attempt, one step in
+    /// the end's own ratio, within the search span; attempts at another working size do not
+    /// count.
+    #[test]
+    fn focal_candidates_extend_beyond_a_winning_end() {
+        let long = 256.0;
+        let opts = SfmOptions::default();
+        let at = |errors: &[f64]| -> Vec<Attempt> {
+            opts.focal_candidates
+                .iter()
+                .zip(errors)
+                .map(|(c, &e)| attempt(c * long, 4, e))
+                .collect()
+        };
+        let next = |a: &[Attempt], opts: &SfmOptions| {
+            focal_beyond_the_candidates(a, 128, long, opts).map(|f| (f * 1e6).round() / 1e6)
+        };
+        // The largest wins: one step of 1.7 / 1.35 beyond it.
+        let up = at(&[1.3, 1.25, 1.2, 1.15, 1.1, 1.0]);
+        assert_eq!(
+            next(&up, &opts),
+            Some((1.7 * 1.7 / 1.35 * 1e6f64).round() / 1e6)
+        );
+        // The smallest wins: one step of 0.6 / 0.75 below it.
+        let down = at(&[1.0, 1.1, 1.15, 1.2, 1.25, 1.3]);
+        assert_eq!(
+            next(&down, &opts),
+            Some((0.6 * 0.6 / 0.75 * 1e6f64).round() / 1e6)
+        );
+        // An inner candidate wins, or the winning end is tied with an inner one nearer the
+        // prior: no extension.
+        assert_eq!(next(&at(&[1.2, 1.1, 1.0, 1.05, 1.1, 1.2]), &opts), None);
+        assert_eq!(next(&at(&[1.3, 1.25, 1.2, 1.15, 1.005, 1.0]), &opts), None);
+        // The span ends at the list's ends: no extension.
+        let held = SfmOptions {
+            focal_search_span: (0.6, 1.7),
+            ..SfmOptions::default()
+        };
+        assert_eq!(next(&up, &held), None);
+        assert_eq!(next(&down, &held), None);
+        // Only the attempts at the working size asked about count.
+        let mut other = up.clone();
+        for a in &mut other {
+            a.working_size = 64;
+        }
+        assert_eq!(next(&other, &opts), None);
     }
 
     /// Overlaps of views placed along a line at `position`: the nearer, the more similar.
