@@ -837,12 +837,15 @@ fn focal_beyond_the_candidates(
     let chosen = choose_attempt(here, long)?.focal_start_px / long;
     let (lo, hi) = opts.focal_search_span;
     let n = tried.len();
+    // Two candidates (nearly) equal at an end give no step: without this a repeated candidate
+    // would be tried again and again.
+    let step = |near: f64, far: f64| (far / near > 1.01).then_some(far * far / near);
     if chosen >= tried[n - 1] * (1.0 - 1e-9) {
-        let up = tried[n - 1] * tried[n - 1] / tried[n - 2];
-        (up <= hi * (1.0 + 1e-9)).then_some(up)
+        step(tried[n - 2], tried[n - 1]).filter(|&up| up <= hi * (1.0 + 1e-9))
     } else if chosen <= tried[0] * (1.0 + 1e-9) {
-        let down = tried[0] * tried[0] / tried[1];
-        (down >= lo * (1.0 - 1e-9)).then_some(down)
+        step(1.0 / tried[1], 1.0 / tried[0])
+            .map(|inv| 1.0 / inv)
+            .filter(|&down| down >= lo * (1.0 - 1e-9))
     } else {
         None
     }
@@ -1440,6 +1443,13 @@ mod tests {
         };
         assert_eq!(next(&up, &held), None);
         assert_eq!(next(&down, &held), None);
+        // A repeated candidate at the winning end gives no step.
+        let repeated: Vec<Attempt> = [1.0, 1.7, 1.7]
+            .iter()
+            .zip([1.2, 1.0, 1.0])
+            .map(|(c, e)| attempt(c * long, 4, e))
+            .collect();
+        assert_eq!(next(&repeated, &opts), None);
         // Only the attempts at the working size asked about count.
         let mut other = up.clone();
         for a in &mut other {
