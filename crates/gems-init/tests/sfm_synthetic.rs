@@ -10,18 +10,23 @@ fn synth_levels() -> &'static std::path::Path {
     static DIR: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
     DIR.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
-        let cfg = gems_synth::SynthConfig {
-            width: 240,
-            height: 160,
-            views: 16,
-            blur_px: 30.0,
-            seed: 11,
-            ..gems_synth::SynthConfig::small()
-        };
+        let cfg = blur_levels_config(16, 11);
         gems_synth::generate_blur_levels(&cfg, &dir.path().join("s"), &mut |_, _| {}).unwrap();
         dir
     })
     .path()
+}
+
+/// `gems synth --blur-levels` at 240×160 whose full 11-frame burst blurs by 30 px.
+fn blur_levels_config(views: usize, seed: u64) -> gems_synth::SynthConfig {
+    gems_synth::SynthConfig {
+        width: 240,
+        height: 160,
+        views,
+        blur_px: 30.0,
+        seed,
+        ..gems_synth::SynthConfig::small()
+    }
 }
 
 /// Sim(3)-aligned translation RMSE over the camera-path extent must stay below `tol` with every
@@ -467,13 +472,8 @@ fn a_photo_of_something_else_is_dropped_with_a_reason_and_advice() {
 fn sharp_level_with_fov(fov_x_deg: f64) -> (Vec<SfmImage>, Vec<gems_math::Se3>, f64) {
     let dir = tempfile::tempdir().unwrap();
     let cfg = gems_synth::SynthConfig {
-        width: 240,
-        height: 160,
-        views: 20,
-        blur_px: 30.0,
         fov_x_deg,
-        seed: 7,
-        ..gems_synth::SynthConfig::small()
+        ..blur_levels_config(20, 7)
     };
     gems_synth::generate_blur_levels(&cfg, &dir.path().join("s"), &mut |_, _| {}).unwrap();
     let ld = dir.path().join("s/blur_01");

@@ -837,18 +837,20 @@ fn focal_beyond_the_candidates(
     let chosen = choose_attempt(here, long)?.focal_start_px / long;
     let (lo, hi) = opts.focal_search_span;
     let n = tried.len();
-    // Two candidates (nearly) equal at an end give no step: without this a repeated candidate
-    // would be tried again and again.
-    let step = |near: f64, far: f64| (far / near > 1.01).then_some(far * far / near);
-    if chosen >= tried[n - 1] * (1.0 - 1e-9) {
-        step(tried[n - 2], tried[n - 1]).filter(|&up| up <= hi * (1.0 + 1e-9))
+    // One step beyond `end` in its ratio to `inner`. Two candidates (nearly) equal at an end
+    // give no step: without this a repeated candidate would be tried again and again.
+    let beyond = |end: f64, inner: f64| {
+        let ratio = end / inner;
+        (ratio.ln().abs() > 1.01f64.ln()).then_some(end * ratio)
+    };
+    let next = if chosen >= tried[n - 1] * (1.0 - 1e-9) {
+        beyond(tried[n - 1], tried[n - 2])
     } else if chosen <= tried[0] * (1.0 + 1e-9) {
-        step(1.0 / tried[1], 1.0 / tried[0])
-            .map(|inv| 1.0 / inv)
-            .filter(|&down| down >= lo * (1.0 - 1e-9))
+        beyond(tried[0], tried[1])
     } else {
         None
-    }
+    };
+    next.filter(|&f| f >= lo * (1.0 - 1e-9) && f <= hi * (1.0 + 1e-9))
 }
 
 /// One reconstruction attempt: a working size and a starting focal.
