@@ -229,6 +229,20 @@ pub(crate) struct ProjGrad {
     pub color: [f64; 3],
 }
 
+impl ProjGrad {
+    /// Every component exactly zero: the projection's backward, linear in this gradient, would
+    /// add only zeros (a Gaussian hidden behind opaque ones, or a camera given no upstream
+    /// gradient), so it is skipped.
+    fn is_zero(&self) -> bool {
+        self.mean2d
+            .iter()
+            .chain(&self.conic)
+            .chain(&self.color)
+            .chain(std::iter::once(&self.opacity))
+            .all(|&v| v == 0.0)
+    }
+}
+
 /// Gradient of one Gaussian, before the quaternion/scale chain (world covariance kept).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct GaussAcc {
@@ -575,6 +589,9 @@ pub(crate) fn backward_all<T: Real>(
                             if let Some(v) = upstream(c, i) {
                                 count += 1;
                                 norm += v.mean2d[0].hypot(v.mean2d[1]);
+                                if v.is_zero() {
+                                    continue;
+                                }
                                 let acc = PairAcc {
                                     gauss: &mut ga,
                                     cam: &mut cam_acc[c],

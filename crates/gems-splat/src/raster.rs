@@ -408,6 +408,16 @@ impl Renderer {
         }
         self.tile_bg_grads.clear();
         self.tile_bg_grads.resize(nc * tiles, [0.0; 3]);
+        // A camera given no upstream gradient contributes exact zeros: its tiles are not walked
+        // and its entries stay zero (the trainer's stochastic backward through a subset of the
+        // virtual views, `TrainConfig::backward_virtual_views`, relies on this to save the time).
+        let active: Vec<bool> = (0..nc)
+            .map(|c| {
+                let img = c * h * w;
+                d_rgb[img * 3..(img + h * w) * 3].iter().any(|&v| v != 0.0)
+                    || d_alpha.is_some_and(|da| da[img..img + h * w].iter().any(|&v| v != 0.0))
+            })
+            .collect();
         let bins = &self.bins;
         let (tile_t, tile_last) = (&self.tile_t, &self.tile_last);
         tile_slices
@@ -416,6 +426,9 @@ impl Renderer {
             .enumerate()
             .for_each(|(gt, (grads, bg_grad))| {
                 let (c, tile) = (gt / tiles, gt % tiles);
+                if !active[c] {
+                    return;
+                }
                 let (tx, ty) = (tile % tiles_x, tile / tiles_x);
                 let px = gt * TILE_PIXELS;
                 let b = &bins[c];
@@ -447,6 +460,9 @@ impl Renderer {
             .par_chunks_mut(n.max(1))
             .enumerate()
             .for_each(|(c, acc)| {
+                if !active[c] {
+                    return;
+                }
                 let b = &bins[c];
                 let base = isect_base[c];
                 for (k, &id) in b.ids.iter().enumerate() {

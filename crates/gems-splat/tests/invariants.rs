@@ -173,6 +173,50 @@ fn results_do_not_depend_on_thread_count() {
     );
 }
 
+/// A camera given no upstream gradient is skipped by the backward (the trainer's stochastic
+/// backward through a subset of virtual views saves its time that way): the batch's gradients
+/// must equal those of the batch without it, and its own pose gradient must be zero.
+#[test]
+fn a_camera_without_upstream_gradient_adds_nothing() {
+    let (w, h) = (64u32, 48u32);
+    let (g, cams, bgs) = random_scene(21, 1500, 3, w, h, 3, (-3.5, -2.0));
+    let s = RenderSettings::default();
+    let px = (w * h) as usize;
+    let d_rgb: Vec<f32> = random_weights(22, 3 * px * 3)
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    // Camera 1's gradient zeroed in the batch of three ...
+    let mut d_masked = d_rgb.clone();
+    d_masked[px * 3..2 * px * 3].fill(0.0);
+    let mut r = Renderer::new();
+    r.forward(&g, &cams, &bgs, &s).unwrap();
+    let masked = r.backward(&g, &cams, &bgs, &d_masked, None).unwrap();
+    // ... against the batch of cameras 0 and 2 alone.
+    let (cams2, bgs2) = (vec![cams[0], cams[2]], vec![bgs[0], bgs[2]]);
+    let mut d_pair = d_rgb[..px * 3].to_vec();
+    d_pair.extend_from_slice(&d_rgb[2 * px * 3..]);
+    r.forward(&g, &cams2, &bgs2, &s).unwrap();
+    let pair = r.backward(&g, &cams2, &bgs2, &d_pair, None).unwrap();
+
+    let bits3 = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits3(&masked.means), bits3(&pair.means));
+    assert_eq!(bits3(&masked.log_scales), bits3(&pair.log_scales));
+    assert_eq!(masked.quats, pair.quats);
+    assert_eq!(masked.opacity_logits, pair.opacity_logits);
+    assert_eq!(masked.sh, pair.sh);
+    assert_eq!(masked.cam_rotation[0], pair.cam_rotation[0]);
+    assert_eq!(masked.cam_rotation[2], pair.cam_rotation[1]);
+    assert_eq!(masked.cam_translation[2], pair.cam_translation[1]);
+    assert_eq!(masked.cam_rotation[1], [[0.0; 3]; 3]);
+    assert_eq!(masked.cam_translation[1], [0.0; 3]);
+    assert_eq!(masked.backgrounds[1], [0.0; 3]);
+    assert!(
+        masked.means.iter().flatten().any(|&v| v != 0.0),
+        "the other cameras should give gradients"
+    );
+}
+
 #[test]
 fn renderer_reuse_gives_identical_results() {
     let (g, cams, bgs) = random_scene(12, 300, 2, 50, 40, 2, (-3.0, -2.0));
