@@ -4,7 +4,8 @@
 //! (cap_max = N, so growth is a no-op; relocation runs only every 100 steps in the defaults).
 //!
 //! The count of virtual views is held fixed (`virtual_view_spacing_px = 0`); `…_fewer_views` runs
-//! the CPU step with 1, 5 and 10. `step_…` runs the CPU engine; `gpu_step_…` the same trainer on
+//! the CPU step with 1, 5 and 10; `…_backward_subset` backpropagates through 3, 5 or 8 of the 15.
+//! `step_…` runs the CPU engine; `gpu_step_…` the same trainer on
 //! the GPU engine (any adapter, lavapipe included: `WGPU_BACKEND=vulkan`), whose step is resident
 //! (gems-gpu `ResidentStep`); its first step, which uploads the Gaussians and the image, is outside
 //! the timed window. `…_workgroup_reduction` forces the backward rasterizer without subgroups;
@@ -55,6 +56,12 @@ fn scene() -> Gaussians {
 /// The trainer at step 3001 of 7000 rendering `views` virtual views every step (the count held
 /// fixed: this view's path is a point, so counts following the blur would render one).
 fn trainer_with_views(views: usize) -> Trainer {
+    trainer_with(views, 0)
+}
+
+/// The trainer rendering `views` virtual views and backpropagating through `backward` of them
+/// (`TrainConfig::backward_virtual_views`; 0 = all).
+fn trainer_with(views: usize, backward: usize) -> Trainer {
     let g = scene();
     let k = Intrinsics {
         fx: 360.0,
@@ -78,6 +85,7 @@ fn trainer_with_views(views: usize) -> Trainer {
         steps: 7000,
         num_virtual_views: views,
         virtual_view_spacing_px: 0.0,
+        backward_virtual_views: backward,
         ..TrainConfig::default()
     };
     cfg.mcmc.cap_max = N;
@@ -128,6 +136,14 @@ fn step_400x270_100k_n15(bencher: divan::Bencher) {
 #[divan::bench(args = [1, 5, 10], sample_count = 3, sample_size = 1)]
 fn step_400x270_100k_fewer_views(bencher: divan::Bencher, views: usize) {
     let mut t = trainer_with_views(views);
+    bencher.bench_local(|| t.step().unwrap());
+}
+
+/// The n = 15 step backpropagating through one view in each of `backward` runs of the
+/// exposure (`TrainConfig::backward_virtual_views`): what the stochastic backward saves.
+#[divan::bench(args = [3, 5, 8], sample_count = 3, sample_size = 1)]
+fn step_400x270_100k_n15_backward_subset(bencher: divan::Bencher, backward: usize) {
+    let mut t = trainer_with(15, backward);
     bencher.bench_local(|| t.step().unwrap());
 }
 

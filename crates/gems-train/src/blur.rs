@@ -209,20 +209,36 @@ pub fn render_blurred<R: Rasterizer + ?Sized>(
 
 /// Back-propagates dL/d(blurred) (`d_blurred`, `[H,W,3]`) through the blur model for the cameras
 /// of the last [`render_blurred`]: returns the renderer's gradients (Gaussians and per-camera
-/// poses) and adds each knot's gradient to `knot_grads` (one [ρ; φ] per knot).
+/// poses) and adds each knot's gradient to `knot_grads` (one [ρ; φ] per knot). Each view's
+/// share of `d_blurred` is `view_weights[k]` ([`backward_view_weights`]), 1/n each when `None`
+/// (the blur model's exact gradient).
 pub fn backward_blurred<R: Rasterizer + ?Sized>(
     r: &mut R,
     g: &Gaussians,
     exposure: &Exposure,
     d_blurred: &[f32],
+    view_weights: Option<&[f32]>,
     ws: &mut BlurWorkspace,
     knot_grads: &mut [[f64; 6]],
 ) -> Result<Gradients, TrainError> {
     let times = exposure.times;
     let inv_n = 1.0 / times.len() as f32;
+    if let Some(w) = view_weights
+        && w.len() != times.len()
+    {
+        return Err(TrainError::Input(format!(
+            "{} view weights for {} virtual views",
+            w.len(),
+            times.len()
+        )));
+    }
     ws.d_rgb.clear();
-    for _ in 0..times.len() {
-        ws.d_rgb.extend(d_blurred.iter().map(|d| d * inv_n));
+    for k in 0..times.len() {
+        match view_weights.map_or(inv_n, |w| w[k]) {
+            // Exact zeros, so that the renderer skips this camera.
+            0.0 => ws.d_rgb.resize(ws.d_rgb.len() + d_blurred.len(), 0.0),
+            wk => ws.d_rgb.extend(d_blurred.iter().map(|d| d * wk)),
+        }
     }
     let grads = r.gradients(g, &ws.cams, &ws.bgs, &ws.d_rgb)?;
     accumulate_knot_gradients(
@@ -234,6 +250,27 @@ pub fn backward_blurred<R: Rasterizer + ?Sized>(
         knot_grads,
     );
     Ok(grads)
+}
+
+/// Each virtual view's weight in a step's backward (`TrainConfig::backward_virtual_views`):
+/// with `k` in 1..n, the n views split into k runs of consecutive views (run j is
+/// `j·n/k .. (j+1)·n/k`), one view drawn uniformly from each and weighted by its run's length
+/// over n, every other view 0; else `None` (every view at 1/n). A view of a run of length m is
+/// drawn with probability 1/m at weight m/n, so its expected weight is 1/n, that of the full
+/// backward. The draw depends only on `seed` and `step`, so a resumed run repeats it.
+pub fn backward_view_weights(n: usize, k: usize, seed: u64, step: usize) -> Option<Vec<f32>> {
+    use rand::{RngExt, SeedableRng};
+    if k == 0 || k >= n {
+        return None;
+    }
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x6261_636b_7761_7264);
+    rng.set_stream(step as u64);
+    let mut w = vec![0.0f32; n];
+    for j in 0..k {
+        let (start, end) = (j * n / k, (j + 1) * n / k);
+        w[rng.random_range(start..end)] = (end - start) as f32 / n as f32;
+    }
+    Some(w)
 }
 
 /// The n virtual cameras of a view (world-to-camera, for the renderer) into `out`.
@@ -275,6 +312,43 @@ pub fn accumulate_knot_gradients(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn backward_view_weights_draw_one_view_per_run_with_expectation_one_over_n() {
+        assert_eq!(backward_view_weights(15, 0, 1, 3), None);
+        assert_eq!(backward_view_weights(15, 15, 1, 3), None);
+        assert_eq!(backward_view_weights(4, 9, 1, 3), None);
+        for (n, k) in [(15, 5), (15, 4), (7, 3), (2, 1), (9, 8)] {
+            let runs: Vec<(usize, usize)> = (0..k).map(|j| (j * n / k, (j + 1) * n / k)).collect();
+            let steps = 4000;
+            let mut mean = vec![0.0f64; n];
+            for step in 0..steps {
+                let w = backward_view_weights(n, k, 11, step).unwrap();
+                assert_eq!(w, backward_view_weights(n, k, 11, step).unwrap());
+                for &(start, end) in &runs {
+                    let drawn: Vec<usize> = (start..end).filter(|&i| w[i] != 0.0).collect();
+                    assert_eq!(drawn.len(), 1, "n {n} k {k} run {start}..{end}: {w:?}");
+                    assert_eq!(w[drawn[0]], (end - start) as f32 / n as f32);
+                }
+                let sum: f32 = w.iter().sum();
+                assert!((sum - 1.0).abs() < 1e-6, "{w:?}");
+                for (m, wi) in mean.iter_mut().zip(&w) {
+                    *m += f64::from(*wi) / steps as f64;
+                }
+            }
+            // Unbiased: every view's mean weight is 1/n (within the draws' sampling error).
+            for (i, m) in mean.iter().enumerate() {
+                assert!(
+                    (m - 1.0 / n as f64).abs() < 0.15 / n as f64,
+                    "n {n} k {k} view {i}: mean weight {m}"
+                );
+            }
+        }
+        // Another step or seed draws other views.
+        let at = |seed, step| backward_view_weights(15, 5, seed, step).unwrap();
+        assert!((1..20).any(|s| at(1, s) != at(1, 0)));
+        assert!((1..20).any(|s| at(s, 0) != at(0, 0)));
+    }
     use gems_math::TrajectoryKind;
 
     fn camera() -> Intrinsics {

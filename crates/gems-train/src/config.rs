@@ -364,6 +364,17 @@ pub struct TrainConfig {
     /// adapt: trajectories start as points (`pose.knot_init_std`) and learn their length with
     /// the full count first. Default 0.3, the coarse-to-fine phase's end.
     pub adaptive_views_from: f64,
+    /// Virtual views each step backpropagates through, on the CPU engine: the step's n views
+    /// are split into this many runs of consecutive views and one view is drawn from each
+    /// (seeded by the run's seed and the step), its share of the blurry image's gradient
+    /// weighted by its run's length. Every view's expected weight stays 1/n, so the gradient
+    /// is an unbiased estimate of the full one, and one draw per run keeps every part of the
+    /// exposure, hence every trajectory knot, in each step's gradient. The forward, the loss
+    /// and the blur model are untouched; the backward, 40 % of a CPU step at n = 15, costs
+    /// k/n of itself. 0 (or ≥ n) = every view (the GeMS paper), the default. The GPU engine
+    /// always backpropagates every view. BENCHMARKS.md, "Backward through a subset of the
+    /// virtual views".
+    pub backward_virtual_views: usize,
     pub trajectory: TrajectoryKind,
     /// Control knots of the Bézier trajectory (9 = degree 8).
     pub bezier_knots: usize,
@@ -397,6 +408,7 @@ impl Default for TrainConfig {
             num_virtual_views: 15,
             virtual_view_spacing_px: 1.0,
             adaptive_views_from: 0.3,
+            backward_virtual_views: 0,
             trajectory: TrajectoryKind::Bezier,
             bezier_knots: BEZIER_DEFAULT_KNOTS,
             ssim_lambda: 0.3,

@@ -41,9 +41,9 @@ mod tensors;
 mod trainer;
 
 pub use blur::{
-    BlurWorkspace, Exposure, Rasterizer, accumulate_knot_gradients, backward_blurred, blur_depths,
-    blur_length_px, exposure_times, render_blurred, virtual_c2w, virtual_cameras,
-    virtual_view_count,
+    BlurWorkspace, Exposure, Rasterizer, accumulate_knot_gradients, backward_blurred,
+    backward_view_weights, blur_depths, blur_length_px, exposure_times, render_blurred,
+    virtual_c2w, virtual_cameras, virtual_view_count,
 };
 pub use checkpoint::{
     CHECKPOINT_JSON, CHECKPOINT_TENSORS, has_checkpoint, load_checkpoint, save_checkpoint,

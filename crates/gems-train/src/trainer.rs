@@ -41,7 +41,7 @@ use crate::adam::GaussianAdam;
 use crate::adam::{AdamHyper, AdamState};
 use crate::blur::{
     BlurWorkspace, Exposure, Rasterizer, accumulate_knot_gradients, backward_blurred,
-    render_blurred, virtual_cameras,
+    backward_view_weights, render_blurred, virtual_cameras,
 };
 use crate::config::TrainConfig;
 use crate::mcmc::{
@@ -787,11 +787,23 @@ impl Trainer {
             times,
             intrinsics: &k,
         };
+        // On the CPU engine only: there the skipped views' time is saved (a GPU backpropagates
+        // every view in about the time of one).
+        let weights = match self.renderer {
+            Engine::Cpu(_) => backward_view_weights(
+                times.len(),
+                self.cfg.backward_virtual_views,
+                self.cfg.seed,
+                step,
+            ),
+            Engine::Gpu(_) => None,
+        };
         let mut grads = backward_blurred(
             &mut self.renderer,
             &self.state.gaussians,
             &exposure,
             &self.d_blurred,
+            weights.as_deref(),
             &mut self.ws,
             &mut self.knot_grads,
         )?;

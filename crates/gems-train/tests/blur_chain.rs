@@ -39,7 +39,7 @@ fn knot_gradients_match_finite_differences_of_the_blurred_loss() {
     };
     render_blurred(&mut r, &g, &exposure, bg, &mut ws).unwrap();
     let mut analytic = vec![[0.0f64; 6]; 4];
-    backward_blurred(&mut r, &g, &exposure, &w, &mut ws, &mut analytic).unwrap();
+    backward_blurred(&mut r, &g, &exposure, &w, None, &mut ws, &mut analytic).unwrap();
 
     // f64 loss straight from the reference renderer.
     let loss = |knots: &[[f64; 6]]| -> f64 {
