@@ -914,6 +914,9 @@ fn bench_real_runs_the_rows_under_the_protocol_and_reads_finished_rows_back() {
         before,
         "the benchmark wrote into the scene"
     );
+    // Fresh rows have nothing to resume, and are not warned that they have no checkpoint.
+    let log = String::from_utf8_lossy(&run.stderr);
+    assert!(!log.contains("no checkpoint"), "{log}");
     let table = std::fs::read_to_string(out.join("bench.md")).unwrap();
     assert!(
         table.contains("protocol deblur-nerf-real at ×4, 10 steps"),

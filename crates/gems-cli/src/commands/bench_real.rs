@@ -216,6 +216,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 cfg.num_virtual_views = 1;
                 cfg.pose.optimize = false;
             }
+            // Only an interrupted row has anything to resume; a fresh one would be warned that
+            // there is no checkpoint.
+            let interrupted = std::fs::read_dir(&dir).is_ok_and(|mut d| d.next().is_some());
             std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
             let cfg_path = out.join(format!("{}.toml", kind.folder()));
             gems_fs::write_atomic(&cfg_path, cfg.to_toml().as_bytes())?;
@@ -228,8 +231,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .arg("--config")
                 .arg(&cfg_path)
                 .args(kind.init_args())
-                .args(["--device", &args.device])
-                .arg("--resume");
+                .args(["--device", &args.device]);
+            if interrupted {
+                cmd.arg("--resume");
+            }
             if let Some(f) = args.downscale {
                 cmd.args(["--downscale", &f.to_string()]);
             }
