@@ -41,6 +41,7 @@ fn main() {
     let mut refine_patch: Option<f64> = None;
     let mut initial_pairs: Option<usize> = None;
     let mut trim: Option<f64> = None;
+    let mut affine: Option<f64> = None;
     let mut it = args[1..].iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -76,6 +77,7 @@ fn main() {
             "--refine-patch" => refine_patch = Some(it.next().unwrap().parse().unwrap()),
             "--initial-pairs" => initial_pairs = Some(it.next().unwrap().parse().unwrap()),
             "--trim" => trim = Some(it.next().unwrap().parse().unwrap()),
+            "--affine-max-blur" => affine = Some(it.next().unwrap().parse().unwrap()),
             s => panic!("unknown argument {s}"),
         }
     }
@@ -112,6 +114,9 @@ fn main() {
     }
     if let Some(r) = refine_patch {
         opts.refine_patch_blur_ratio = r;
+    }
+    if let Some(b) = affine {
+        opts.refine_affine_max_blur_px = b;
     }
     if let Some(f) = trim {
         opts.trim_fraction = f;

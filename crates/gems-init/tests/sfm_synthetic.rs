@@ -331,6 +331,10 @@ fn bad_tracking_density_is_a_clear_error() {
             trim_max_blur: -0.1,
             ..SfmOptions::default()
         },
+        SfmOptions {
+            refine_affine_max_blur_px: f64::NAN,
+            ..SfmOptions::default()
+        },
     ] {
         let e = run_sfm(&s.images, &opts).unwrap_err();
         assert!(matches!(e, SfmError::InvalidOption(_)), "{e}");

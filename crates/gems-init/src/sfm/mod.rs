@@ -168,6 +168,17 @@ pub struct SfmOptions {
     /// 12.9 % of the long side) and a `gems bench-quality` scene (14.5 %) trained 0.4 dB worse
     /// refined from its better cameras (same section).
     pub trim_max_blur: f64,
+    /// Where the model is re-measured and the estimated blur there is at most this many pixels,
+    /// each match is refined with an affine map of its window (the predicted surface warp
+    /// corrected, damped toward it), not by translation alone: the predicted warp assumes a
+    /// surface facing the two views' bisector, and where that is wrong a translation-only match
+    /// is biased the same way all along a camera arc. Under more smear the map also fits the
+    /// views' differing smears. 0 turns it off. Default 10: on 16 sharp scenes the centres came
+    /// out 0.086 → 0.048 % of the path extent and the estimated focal 1.54 → 0.90 % off; at
+    /// 5.5 px of true blur the scenes it applies to are no better (0.346 → 0.373 %), and from
+    /// 14 px of blur (blurball included) it does not apply (crates/gems-init/BENCHMARKS.md,
+    /// "Affine re-measurement of nearly sharp photos").
+    pub refine_affine_max_blur_px: f64,
     /// Seed of every random choice (RANSAC); same seed, same result.
     pub seed: u64,
 }
@@ -217,6 +228,7 @@ impl Default for SfmOptions {
             initial_pairs: 3,
             trim_fraction: 0.4,
             trim_max_blur: 0.1,
+            refine_affine_max_blur_px: 10.0,
             seed: 0,
         }
     }
@@ -962,6 +974,12 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
             opts.trim_max_blur
         )));
     }
+    if opts.refine_affine_max_blur_px.is_nan() || opts.refine_affine_max_blur_px < 0.0 {
+        return Err(SfmError::InvalidOption(format!(
+            "refine_affine_max_blur_px must be ≥ 0, got {}",
+            opts.refine_affine_max_blur_px
+        )));
+    }
     if !(0.0..1.0).contains(&opts.trim_fraction) {
         return Err(SfmError::InvalidOption(format!(
             "trim_fraction must be in [0, 1), got {}",
@@ -1168,6 +1186,7 @@ fn all_tracks(
         min_ncc: 0.75,
         min_margin: 0.01,
         fb_tol: 1.0,
+        affine: false,
     };
     let smooth: Vec<tracking::Prepared> = work
         .par_iter()

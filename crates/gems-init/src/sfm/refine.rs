@@ -67,6 +67,8 @@ pub(crate) fn remeasure(
         min_ncc: 0.75,
         min_margin: 0.01,
         fb_tol: 1.0,
+        // The smear at this level, as the patch size above.
+        affine: opts.refine_affine_max_blur_px > 0.0 && blur * to <= opts.refine_affine_max_blur_px,
     };
     let scale = |xy: &Vector2<f64>| xy * r;
     let tracks: Vec<incremental::Track> = rec
