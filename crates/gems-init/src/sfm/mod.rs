@@ -28,7 +28,9 @@
 //! 6. coarse to fine: the model is re-measured and bundle-adjusted at the finest level where the
 //!    estimated blur is at most [`SfmOptions::refine_max_blur_px`], then once more there; each
 //!    template is warped into the other view by the model's local surface map, with patches
-//!    sized to the blur ([`SfmOptions::refine_patch_blur_ratio`]); an estimated focal is
+//!    sized to the blur ([`SfmOptions::refine_patch_blur_ratio`]) and, where the blur there is
+//!    short, each match's window corrected by an affine map
+//!    ([`SfmOptions::refine_affine_max_blur_px`]); an estimated focal is
 //!    refined once more there, anywhere within the candidates' span; with
 //!    [`SfmOptions::capture_order`], every bundle adjustment also holds the camera path smooth;
 //! 7. a last bundle adjustment moves the cameras on the best-measured points only, the

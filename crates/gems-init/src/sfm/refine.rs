@@ -11,7 +11,9 @@
 //! a translation-only match of a patch seen 20–40° apart is off by up to a pixel, and always the
 //! same way along a camera arc (a path that turns 3 % too far at no blur at all). And patches are
 //! sized to the blur at that level ([`SfmOptions::refine_patch_blur_ratio`]): a sharp photo is
-//! re-measured with small patches, which straddle fewer depth edges.
+//! re-measured with small patches, which straddle fewer depth edges. Where the blur there is
+//! short ([`SfmOptions::refine_affine_max_blur_px`]) each match also corrects that warp by an
+//! affine map of its window, since the predicted one assumes a surface facing both views.
 
 use super::ba::{Focal, Pinhole};
 use super::features::Gray;
