@@ -658,6 +658,48 @@ mod tests {
         assert!(invert(&Warp::new(1.0, 2.0, 0.5, 1.0)).is_none());
     }
 
+    /// A 140×120 view of `texture` and a second view of it seen through the affine map `a`
+    /// (offsets d around (70, 60) in the first appear at (72.3, 58.6) + a·d in the second), both
+    /// smoothed; returns them and the second view's true position of the first's point `pt`.
+    fn affine_pair(
+        texture: &dyn Fn(f32, f32) -> f32,
+        a: &Warp,
+    ) -> (Prepared, Prepared, impl Fn([f32; 2]) -> [f32; 2]) {
+        let inv = invert(a).unwrap();
+        let (w, h) = (140, 120);
+        let (cs, cd) = ([70.0f32, 60.0], [72.3f32, 58.6]);
+        let image = |f: &dyn Fn(f32, f32) -> f32| Gray {
+            w,
+            h,
+            data: (0..w * h)
+                .map(|i| f((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
+                .collect(),
+        };
+        let src = Prepared::new(image(texture).gaussian(1.0));
+        let dst = Prepared::new(
+            image(&|x, y| {
+                let e = inv * Vector2::new(x - cd[0], y - cd[1]);
+                texture(cs[0] + e.x, cs[1] + e.y)
+            })
+            .gaussian(1.0),
+        );
+        let a = *a;
+        let truth = move |pt: [f32; 2]| {
+            let d = a * Vector2::new(pt[0] - cs[0], pt[1] - cs[1]);
+            [cd[0] + d.x, cd[1] + d.y]
+        };
+        (src, dst, truth)
+    }
+
+    /// Query points around the first view's centre (70, 60).
+    const AFFINE_OFFSETS: [[f32; 2]; 5] = [
+        [0.0, 0.0],
+        [-14.3, 9.1],
+        [11.7, -12.4],
+        [16.2, 14.8],
+        [-9.0, -15.5],
+    ];
+
     /// A patch seen obliquely in the other view (an affine map of its offsets) is found where
     /// the map puts it when the template goes through that map, and with a bias without it.
     #[test]
@@ -668,25 +710,7 @@ mod tests {
                 + 0.4 * (0.011 * u * v + 0.3).sin()
         };
         let a = Warp::new(0.72, 0.22, -0.05, 1.18);
-        let inv = invert(&a).unwrap();
-        let (w, h) = (140, 120);
-        let (cs, cd) = ([70.0f32, 60.0], [72.3f32, 58.6]);
-        let image = |f: &dyn Fn(f32, f32) -> f32| Gray {
-            w,
-            h,
-            data: (0..w * h)
-                .map(|i| f((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
-                .collect(),
-        };
-        let src = Prepared::new(image(&texture).gaussian(1.0));
-        let dst = Prepared::new(
-            image(&|x, y| {
-                let (ex, ey) = (x - cd[0], y - cd[1]);
-                let e = inv * Vector2::new(ex, ey);
-                texture(cs[0] + e.x, cs[1] + e.y)
-            })
-            .gaussian(1.0),
-        );
+        let (src, dst, truth_of) = affine_pair(&texture, &a);
         let p = TrackParams {
             half: 8,
             radius: 6,
@@ -698,10 +722,9 @@ mod tests {
         };
         let mut s = Scratch::default();
         let (mut warped, mut plain) = (Vec::new(), Vec::new());
-        for e in [[0.0f32, 0.0], [-14.3, 9.1], [11.7, -12.4], [16.2, 14.8]] {
-            let pt = [cs[0] + e[0], cs[1] + e[1]];
-            let d = a * Vector2::new(e[0], e[1]);
-            let truth = [cd[0] + d.x, cd[1] + d.y];
+        for e in &AFFINE_OFFSETS[..4] {
+            let pt = [70.0 + e[0], 60.0 + e[1]];
+            let truth = truth_of(pt);
             let err = |q: [f32; 2]| (q[0] - truth[0]).hypot(q[1] - truth[1]);
             let q = track_point(&src, &dst, pt, truth, &a, &p, &mut s).expect("tracked");
             warped.push(err(q));
@@ -730,24 +753,7 @@ mod tests {
         };
         let a = Warp::new(0.84, 0.16, -0.05, 1.1);
         let predicted = a * Warp::new(1.13, -0.09, 0.07, 0.88);
-        let inv = invert(&a).unwrap();
-        let (w, h) = (140, 120);
-        let (cs, cd) = ([70.0f32, 60.0], [72.3f32, 58.6]);
-        let image = |f: &dyn Fn(f32, f32) -> f32| Gray {
-            w,
-            h,
-            data: (0..w * h)
-                .map(|i| f((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
-                .collect(),
-        };
-        let src = Prepared::new(image(&texture).gaussian(1.0));
-        let dst = Prepared::new(
-            image(&|x, y| {
-                let e = inv * Vector2::new(x - cd[0], y - cd[1]);
-                texture(cs[0] + e.x, cs[1] + e.y)
-            })
-            .gaussian(1.0),
-        );
+        let (src, dst, truth_of) = affine_pair(&texture, &a);
         let mut p = TrackParams {
             half: 6,
             radius: 4,
@@ -760,19 +766,11 @@ mod tests {
         let mut s = Scratch::default();
         let mut errors = |affine: bool| -> Vec<f32> {
             p.affine = affine;
-            let offsets = [
-                [0.0f32, 0.0],
-                [-14.3, 9.1],
-                [11.7, -12.4],
-                [16.2, 14.8],
-                [-9.0, -15.5],
-            ];
-            offsets
+            AFFINE_OFFSETS
                 .iter()
                 .map(|e| {
-                    let pt = [cs[0] + e[0], cs[1] + e[1]];
-                    let d = a * Vector2::new(e[0], e[1]);
-                    let truth = [cd[0] + d.x, cd[1] + d.y];
+                    let pt = [70.0 + e[0], 60.0 + e[1]];
+                    let truth = truth_of(pt);
                     let q = track_point(&src, &dst, pt, truth, &predicted, &p, &mut s)
                         .expect("tracked");
                     (q[0] - truth[0]).hypot(q[1] - truth[1])
