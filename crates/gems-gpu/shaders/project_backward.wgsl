@@ -1,8 +1,9 @@
 // Per Gaussian, over every camera that did not cull it: the backward of the projection, SH
 // colour and opacity (as gems-splat `project.rs`), then of the covariance to the raw
 // quaternion and the log-scales. Writes the Gaussian's gradients (packed like its parameters),
-// its densification statistics, and each camera's share of the pose gradient
-// (`pose_parts[c·N + i]`: dL/dR row-major, dL/dt), which reduce_segments sums per camera.
+// its densification statistics, and each camera's share of the pose and focal gradient
+// (`pose_parts[c·N + i]`: dL/dR row-major, dL/dt, dL/dfx, dL/dfy; POSE_FLOATS = 14 floats),
+// which reduce_segments sums per camera.
 //
 // Camera chunks: a batch too large for the adapter's bindings runs as consecutive calls over
 // chunks of its cameras. The per-Gaussian sums over cameras (mean, covariance, opacity, SH,
@@ -75,6 +76,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         let ci = c * n + i;
         var v_r = mat3x3<f32>();
         var v_t = vec3<f32>(0.0);
+        var v_f = vec2<f32>(0.0);
         if prep.ok && radii[ci].x > 0 {
             let sgb = ci * SG;
             let vm = vec2<f32>(splat_grads[sgb], splat_grads[sgb + 1u]);
@@ -173,6 +175,10 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             } else {
                 v_pc.y += v_ty;
             }
+            // Focal lengths: each row of J is its focal times a focal-free row, except the last
+            // entry of a clamped coordinate (there f·t is focal-free).
+            v_f.x = (vj0.x * j0.x + select(vj0.z * j0.z, 0.0, geo.clamped_x)) / fx + vm.x * x / z;
+            v_f.y = (vj1.y * j1.y + select(vj1.z * j1.z, 0.0, geo.clamped_y)) / fy + vm.y * y / z;
             v_pc.x += fx / z * vm.x;
             v_pc.y += fy / z * vm.y;
             v_pc.z += -fx * x / z2 * vm.x - fy * y / z2 * vm.y;
@@ -186,13 +192,15 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             v_cov_acc += transpose(cam.r) * v_cov_c * cam.r;
             v_mean_acc += v_mean;
         }
-        let pb = ci * 12u;
+        let pb = ci * 14u;
         for (var a = 0u; a < 3u; a++) {
             for (var bb = 0u; bb < 3u; bb++) {
                 pose_parts[pb + a * 3u + bb] = el(v_r, a, bb);
             }
             pose_parts[pb + 9u + a] = v_t[a];
         }
+        pose_parts[pb + 12u] = v_f.x;
+        pose_parts[pb + 13u] = v_f.y;
     }
 
     if (params.carry & 2u) != 0u {

@@ -1,13 +1,13 @@
-// Sums `params.num_blocks` segments of `params.seg_len` rows of `params.seg_width` (≤ 12)
+// Sums `params.num_blocks` segments of `params.seg_len` rows of `params.seg_width` (≤ 14)
 // floats: one workgroup per segment, a fixed strided assignment of rows to invocations and a
 // fixed tree, so the result does not depend on scheduling. Used for the per-camera pose
-// gradients (rows = Gaussians).
+// and focal gradients (rows = Gaussians).
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> rows_in: array<f32>;
 @group(0) @binding(2) var<storage, read_write> sums: array<f32>;
 
-var<workgroup> part: array<array<f32, 256>, 12>;
+var<workgroup> part: array<array<f32, 256>, 14>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -17,20 +17,20 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         return;
     }
     let width = params.seg_width;
-    var acc: array<f32, 12>;
+    var acc: array<f32, 14>;
     for (var r = lid; r < params.seg_len; r += 256u) {
         let base = (seg * params.seg_len + r) * width;
         for (var q = 0u; q < width; q++) {
             acc[q] += rows_in[base + q];
         }
     }
-    for (var q = 0u; q < 12u; q++) {
+    for (var q = 0u; q < 14u; q++) {
         part[q][lid] = acc[q];
     }
     for (var half = 128u; half > 0u; half >>= 1u) {
         workgroupBarrier();
         if lid < half {
-            for (var q = 0u; q < 12u; q++) {
+            for (var q = 0u; q < 14u; q++) {
                 part[q][lid] += part[q][lid + half];
             }
         }

@@ -11,6 +11,7 @@
 
 use gems_splat::{Camera, Gaussians, Gradients, RenderOutput, RenderSettings, Renderer};
 
+use crate::renderer::POSE_FLOATS;
 use crate::{
     CameraChunk, DeviceChoice, GpuError, GpuGaussians, GpuGradients, GpuRenderer, ImageBatch,
     buffers,
@@ -218,7 +219,7 @@ impl FrozenScene<'_> {
                     &res.grads,
                     CameraChunk::WHOLE,
                 )?;
-                let p: Vec<f32> = buffers::download(&ctx, r.pose_gradients()?, 0, 12)?;
+                let p: Vec<f32> = buffers::download(&ctx, r.pose_gradients()?, 0, POSE_FLOATS)?;
                 Ok((
                     [[p[0], p[1], p[2]], [p[3], p[4], p[5]], [p[6], p[7], p[8]]],
                     [p[9], p[10], p[11]],

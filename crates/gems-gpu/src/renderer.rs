@@ -11,7 +11,7 @@
 //! gradient (summed over the tile's pixels in workgroup memory) to its own slot →
 //! `sum_intersections` adds each Gaussian's entries in tile order → `project_backward`
 //! (per Gaussian over the cameras; SH, covariance, quaternion, pose shares) →
-//! `reduce_segments` (pose gradient per camera) and `background_backward`.
+//! `reduce_segments` (pose and focal gradient per camera) and `background_backward`.
 //!
 //! No stage uses atomics on floats: every sum has a fixed order, so the same inputs on the
 //! same adapter and driver give the same bits. Results differ from the CPU engine by float
@@ -38,6 +38,9 @@ const TILE: u32 = 16;
 /// Floats per Gaussian of the accumulators carried between camera chunks
 /// (`CARRY` in `shaders/project_backward.wgsl`).
 const CARRY: usize = 63;
+/// Floats of one camera's pose and focal gradient (dL/dR row-major, dL/dt, dL/dfx, dL/dfy), as
+/// `project_backward.wgsl` writes them.
+pub(crate) const POSE_FLOATS: usize = 14;
 
 /// Where the Gaussians of a forward call come from.
 #[derive(Clone, Copy)]
@@ -647,7 +650,7 @@ impl GpuRenderer {
             &[
                 (&grads_b, 0, (n * GP * 4) as u64),
                 (&stats_b, 0, n as u64 * 8),
-                (&pose_b, 0, nc as u64 * 48),
+                (&pose_b, 0, (nc * POSE_FLOATS * 4) as u64),
                 (&bg_b, 0, nc as u64 * 12),
             ],
         )?;
@@ -664,6 +667,7 @@ impl GpuRenderer {
             backgrounds: bg.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect(),
             cam_rotation: Vec::with_capacity(nc),
             cam_translation: Vec::with_capacity(nc),
+            cam_focal: Vec::with_capacity(nc),
             mean2d_grad_norm: Vec::with_capacity(n),
             visible_count: Vec::with_capacity(n),
         };
@@ -682,13 +686,14 @@ impl GpuRenderer {
             out.mean2d_grad_norm.push(st[0]);
             out.visible_count.push(st[1].to_bits());
         }
-        for pc in pose.chunks_exact(12) {
+        for pc in pose.chunks_exact(POSE_FLOATS) {
             out.cam_rotation.push([
                 [pc[0], pc[1], pc[2]],
                 [pc[3], pc[4], pc[5]],
                 [pc[6], pc[7], pc[8]],
             ]);
             out.cam_translation.push([pc[9], pc[10], pc[11]]);
+            out.cam_focal.push([pc[12], pc[13]]);
         }
         Ok(out)
     }
@@ -744,8 +749,8 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// The per-camera pose gradients of the last backward call, `[C, 12]` f32: dL/dR
-    /// row-major then dL/dt of each camera (world-to-camera).
+    /// The per-camera pose and focal gradients of the last backward call, `[C, POSE_FLOATS]`
+    /// f32: dL/dR row-major, dL/dt (world-to-camera), then dL/dfx and dL/dfy of each camera.
     pub fn pose_gradients(&self) -> Result<&wgpu::Buffer, GpuError> {
         if !self.saved.valid {
             return Err(SplatError::NoForward("no successful forward call".into()).into());
@@ -806,8 +811,9 @@ impl GpuRenderer {
         b.splat_grads.ensure(dev, lim, (nc * n) as u64 * SG * 4)?;
         b.grads.ensure(dev, lim, (n * GP * 4) as u64)?;
         b.stats.ensure(dev, lim, n as u64 * 8)?;
-        b.pose_parts.ensure(dev, lim, (nc * n) as u64 * 48)?;
-        b.pose.ensure(dev, lim, nc as u64 * 48)?;
+        b.pose_parts
+            .ensure(dev, lim, (nc * n * POSE_FLOATS * 4) as u64)?;
+        b.pose.ensure(dev, lim, (nc * POSE_FLOATS * 4) as u64)?;
         b.bg_grads.ensure(dev, lim, nc as u64 * 12)?;
         let chunked = chunk != CameraChunk::WHOLE;
         b.carry
@@ -866,7 +872,7 @@ impl GpuRenderer {
         );
         p.num_blocks = nc as u32;
         p.seg_len = n as u32;
-        p.seg_width = 12;
+        p.seg_width = POSE_FLOATS as u32;
         dispatch(
             &self.ctx,
             &mut enc,

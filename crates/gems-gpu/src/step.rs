@@ -37,11 +37,8 @@ use crate::loss::BlurLoss;
 use crate::mcmc::{GpuMcmc, NoiseParams};
 use crate::params::{GpuGaussians, GpuGradients, Group, GroupMoments};
 use crate::regularize::GpuRegularizers;
-use crate::renderer::{CameraChunk, GpuRenderer};
+use crate::renderer::{CameraChunk, GpuRenderer, POSE_FLOATS};
 use crate::{GpuContext, GpuError, ImageBatch};
-
-/// Floats of one camera's pose gradient (dL/dR row-major, dL/dt).
-const POSE_FLOATS: usize = 12;
 
 /// The constants of a step that are not per view.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,6 +67,8 @@ pub struct StepResult {
     pub cam_rotation: Vec<[[f32; 3]; 3]>,
     /// dL/dt of each virtual camera.
     pub cam_translation: Vec<[f32; 3]>,
+    /// (dL/dfx, dL/dfy) per camera.
+    pub cam_focal: Vec<[f32; 2]>,
 }
 
 /// The Gaussians, their Adam moments, the training images and every per-step buffer,
@@ -242,6 +241,10 @@ impl ResidentStep {
             cam_translation: pose
                 .chunks_exact(POSE_FLOATS)
                 .map(|p| [p[9], p[10], p[11]])
+                .collect(),
+            cam_focal: pose
+                .chunks_exact(POSE_FLOATS)
+                .map(|p| [p[12], p[13]])
                 .collect(),
         })
     }

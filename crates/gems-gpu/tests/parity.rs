@@ -110,6 +110,8 @@ fn assert_grads_match(what: &str, gpu: &Gradients, cpu: &Gradients) {
         flat3(&gpu.cam_translation),
         flat3(&cpu.cam_translation),
     );
+    let focal = |g: &Gradients| g.cam_focal.iter().flatten().map(|&v| v as f64).collect();
+    c("cam focal", focal(gpu), focal(cpu));
     c(
         "mean2d norm",
         f64v(&gpu.mean2d_grad_norm),

@@ -230,6 +230,16 @@ impl Intrinsics {
         }
     }
 
+    /// The same camera with both focal lengths multiplied by `factor` (a zoom about the
+    /// principal point).
+    pub fn with_focal_scaled(&self, factor: f64) -> Intrinsics {
+        Intrinsics {
+            fx: self.fx * factor,
+            fy: self.fy * factor,
+            ..*self
+        }
+    }
+
     /// Row-major 3×3 calibration matrix K.
     pub fn matrix(&self) -> [[f64; 3]; 3] {
         [

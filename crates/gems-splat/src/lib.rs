@@ -342,6 +342,8 @@ pub struct Gradients {
     /// Euclidean dL/dR per camera.
     pub cam_rotation: Vec<[[f32; 3]; 3]>,
     pub cam_translation: Vec<[f32; 3]>,
+    /// (dL/dfx, dL/dfy) per camera.
+    pub cam_focal: Vec<[f32; 2]>,
     /// Per Gaussian, summed over cameras: `|dL/d mean2d|` (pixel units) of each camera.
     pub mean2d_grad_norm: Vec<f32>,
     /// Per Gaussian: the number of cameras in which it was not culled (radius > 0).

@@ -252,15 +252,20 @@ pub(crate) struct GaussAcc {
     pub sh: [[f64; 3]; 16],
 }
 
-/// Gradient of one camera pose.
+/// Gradient of one camera: its pose and its focal lengths.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct CamAcc {
     pub r: Mat3,
     pub t: [f64; 3],
+    /// (dL/dfx, dL/dfy).
+    pub focal: [f64; 2],
 }
 
 impl CamAcc {
     pub fn add(&mut self, o: &CamAcc) {
+        for a in 0..2 {
+            self.focal[a] += o.focal[a];
+        }
         for a in 0..3 {
             self.t[a] += o.t[a];
             for b in 0..3 {
@@ -385,6 +390,19 @@ pub(crate) fn project_backward(
     } else {
         v_pc[1] += v_ty;
     }
+    // Focal lengths. Each row of J is its focal times a focal-free row, except the last entry
+    // of a clamped coordinate: there t = z·limit with limit ∝ 1/f, so f·t is focal-free.
+    // (The screen extent and the culling depend on f too but, as in gsplat, carry no gradient.)
+    for (p, f) in [fx, fy].into_iter().enumerate() {
+        let last = if geo.clamped[p] {
+            0.0
+        } else {
+            v_j[p][2] * j[p][2]
+        };
+        ca.focal[p] += (v_j[p][p] * j[p][p] + last) / f;
+    }
+    ca.focal[0] += v.mean2d[0] * x / z;
+    ca.focal[1] += v.mean2d[1] * y / z;
     // Mean: u = fx x/z + cx, v = fy y/z + cy.
     v_pc[0] += fx / z * v.mean2d[0];
     v_pc[1] += fy / z * v.mean2d[1];

@@ -490,6 +490,7 @@ impl Renderer {
             backgrounds: backgrounds_grad,
             cam_rotation: Vec::new(),
             cam_translation: Vec::new(),
+            cam_focal: Vec::new(),
             mean2d_grad_norm: vec![0.0; n],
             visible_count: vec![0; n],
         };
@@ -529,6 +530,10 @@ impl Renderer {
             .map(|cg| cg.r.map(|row| row.map(|v| v as f32)))
             .collect();
         out.cam_translation = cam_grads.iter().map(|cg| cg.t.map(|v| v as f32)).collect();
+        out.cam_focal = cam_grads
+            .iter()
+            .map(|cg| cg.focal.map(|v| v as f32))
+            .collect();
         Ok(out)
     }
 }

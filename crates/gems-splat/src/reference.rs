@@ -40,6 +40,8 @@ pub struct ReferenceGradients {
     pub backgrounds: Vec<[f64; 3]>,
     pub cam_rotation: Vec<[[f64; 3]; 3]>,
     pub cam_translation: Vec<[f64; 3]>,
+    /// (dL/dfx, dL/dfy) per camera.
+    pub cam_focal: Vec<[f64; 2]>,
     pub mean2d_grad_norm: Vec<f64>,
     pub visible_count: Vec<u32>,
 }
@@ -276,6 +278,7 @@ pub fn backward(
         backgrounds: v_bg,
         cam_rotation: Vec::new(),
         cam_translation: Vec::new(),
+        cam_focal: Vec::new(),
         mean2d_grad_norm: vec![0.0; n],
         visible_count: vec![0; n],
     };
@@ -299,5 +302,6 @@ pub fn backward(
     );
     out.cam_rotation = cam_grads.iter().map(|cg| cg.r).collect();
     out.cam_translation = cam_grads.iter().map(|cg| cg.t).collect();
+    out.cam_focal = cam_grads.iter().map(|cg| cg.focal).collect();
     Ok(out)
 }

@@ -168,6 +168,14 @@ fn run_fd(antialiased: bool, seed: u64) {
                 s_t,
             );
         }
+        let s_f = scale_of(&gr.cam_focal.concat());
+        for k in 0..2 {
+            let x = if k == 0 { cams[c].fx } else { cams[c].fy };
+            let d = fd(&loss, &g, &cams, x, h_of(x), |_, cs, v| {
+                *(if k == 0 { &mut cs[c].fx } else { &mut cs[c].fy }) = v;
+            });
+            check(&format!("cam focal[{c}][{k}]"), d, gr.cam_focal[c][k], s_f);
+        }
         let r0: [[f64; 3]; 3] = cams[c].rotation.map(|r| r.map(f64::from));
         let mut s_r = 0.0f64;
         let mut results = Vec::new();
@@ -286,6 +294,8 @@ fn fast_matches_reference_on_random_scenes() {
             &flat3(&gf.cam_translation),
             &flat3(&gr.cam_translation),
         );
+        let focal = |v: &[[f32; 2]]| v.iter().flatten().map(|&x| x as f64).collect::<Vec<_>>();
+        assert_grad_close("cam focal", &focal(&gf.cam_focal), &gr.cam_focal.concat());
         assert_grad_close(
             "mean2d norm",
             &f64v(&gf.mean2d_grad_norm),

@@ -105,6 +105,7 @@ impl Rasterizer for Reference {
                 .map(|m| m.map(|row| row.map(|x| x as f32)))
                 .collect(),
             cam_translation: r.cam_translation.iter().map(f3).collect(),
+            cam_focal: r.cam_focal.iter().map(|f| f.map(|x| x as f32)).collect(),
             mean2d_grad_norm: r.mean2d_grad_norm.iter().map(|&x| x as f32).collect(),
             visible_count: r.visible_count.clone(),
         })
