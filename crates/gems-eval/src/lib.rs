@@ -56,9 +56,10 @@ pub mod viewer;
 use std::path::{Path, PathBuf};
 
 pub use metrics::{
-    ApeSummary, CameraShift, EvalView, HeldOutFrame, HeldOutPosing, ImageScore, MetricsReport,
-    PoseMode, RotationErrorSummary, SplitResult, SplitScores, ape_of_centres, evaluate_views,
-    evaluate_views_with_progress, relative_rotation_error, score_image, split_labels,
+    ApeSummary, CameraShift, EvalView, FocalSummary, HeldOutFrame, HeldOutPosing, ImageScore,
+    MetricsReport, PoseMode, RotationErrorSummary, SplitResult, SplitScores, ape_of_centres,
+    evaluate_views, evaluate_views_with_progress, relative_rotation_error, score_image,
+    split_labels,
 };
 pub use protocol::{
     EvalData, Evaluation, HeldOutView, attach_edi_images, eval_data_from_scene,

@@ -73,6 +73,48 @@ pub struct ApeSummary {
     pub max: f64,
 }
 
+/// The cameras' focal length (x, first training view, pixels at its training size): where
+/// training started, where it ended (`pose.focal_lr`; the same when not learned), and the
+/// scene's own camera when it has one (generated scenes: the truth; real datasets: their
+/// calibration).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FocalSummary {
+    pub initial_px: f64,
+    pub trained_px: f64,
+    pub scene_px: Option<f64>,
+}
+
+impl FocalSummary {
+    /// Relative error of the trained and the initial focal against the scene's, in %.
+    pub fn errors_percent(&self) -> Option<(f64, f64)> {
+        let s = self.scene_px?;
+        Some((
+            100.0 * (self.trained_px - s) / s,
+            100.0 * (self.initial_px - s) / s,
+        ))
+    }
+
+    /// One line for the report and the console, e.g. "146.5 px at the start, 157.2 px trained;
+    /// the scene's camera has 173.2 px: -15.42 % at the start, -9.23 % trained".
+    pub fn describe(&self) -> String {
+        let learned = if self.trained_px == self.initial_px {
+            format!("{:.1} px, kept (not learned)", self.trained_px)
+        } else {
+            format!(
+                "{:.1} px at the start, {:.1} px trained",
+                self.initial_px, self.trained_px
+            )
+        };
+        match (self.scene_px, self.errors_percent()) {
+            (Some(s), Some((trained, initial))) => format!(
+                "{learned}; the scene's camera has {s:.1} px: {initial:+.2} % at the start, \
+                 {trained:+.2} % trained"
+            ),
+            _ => learned,
+        }
+    }
+}
+
 /// Relative rotation error over every pair of views, in degrees: for views i and j the angle of
 /// (R̂ᵢᵀ R̂ⱼ)ᵀ (Rᵢᵀ Rⱼ), the estimated camera-to-camera rotation against the ground truth's. It
 /// needs no alignment (a global rotation of either set cancels) and sees what APE, which aligns
@@ -215,6 +257,9 @@ pub struct MetricsReport {
     /// The same for the initial poses.
     #[serde(default)]
     pub rotation_error_init: Option<RotationErrorSummary>,
+    /// The focal length before and after training, beside the scene's camera.
+    #[serde(default)]
+    pub focal: Option<FocalSummary>,
     pub steps: usize,
     pub seconds: f64,
     pub gaussians: usize,

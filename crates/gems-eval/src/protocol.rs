@@ -12,9 +12,9 @@ use gems_train::TrainOutput;
 
 use crate::EvalError;
 use crate::metrics::{
-    ApeSummary, CameraShift, EvalView, HeldOutFrame, HeldOutPosing, MetricsReport, PoseMode,
-    RotationErrorSummary, SplitResult, SplitScores, ape_of_centres, evaluate_views_with_progress,
-    relative_rotation_error, score_image,
+    ApeSummary, CameraShift, EvalView, FocalSummary, HeldOutFrame, HeldOutPosing, MetricsReport,
+    PoseMode, RotationErrorSummary, SplitResult, SplitScores, ape_of_centres,
+    evaluate_views_with_progress, relative_rotation_error, score_image,
 };
 use crate::refine::PoseRefineConfig;
 use crate::report::{GridRow, ReportInput};
@@ -48,6 +48,9 @@ pub struct EvalData {
     pub held_out_posing: Option<HeldOutPosing>,
     /// How far the trained cameras moved from the held-out views' pose source's cameras.
     pub camera_shift: Option<CameraShift>,
+    /// The scene's own camera for each training view (same order; empty or `None` where the
+    /// scene has none), at the trained view's size.
+    pub train_scene_intrinsics: Vec<Option<Intrinsics>>,
 }
 
 /// Everything one evaluation produced.
@@ -147,6 +150,16 @@ pub fn evaluate_output_on(
         ape_init,
         rotation_error: rotation_error_if_known(&mid_pairs),
         rotation_error_init: rotation_error_if_known(&init_pairs),
+        focal: output.views.first().map(|v| FocalSummary {
+            initial_px: v.intrinsics.fx / output.focal_factor,
+            trained_px: v.intrinsics.fx,
+            scene_px: data
+                .train_scene_intrinsics
+                .first()
+                .copied()
+                .flatten()
+                .map(|k| k.fx),
+        }),
         steps: output.steps,
         seconds: output.seconds,
         gaussians: gaussians.len(),
@@ -341,6 +354,10 @@ pub fn eval_data_from_scene_in(
         };
         data.train_gt.push(gt);
         data.train_blurry.push(blurry);
+        data.train_scene_intrinsics.push(
+            sv.and_then(|s| s.intrinsics)
+                .map(|k| k.resized(v.intrinsics.width, v.intrinsics.height)),
+        );
     }
     let pose_model = match &output.pose_model {
         Some(dir) => {
@@ -386,9 +403,11 @@ pub fn eval_data_from_scene_in(
             tracing::warn!(view = %s.name, "held-out view has no pose; not evaluated");
             continue;
         };
-        // The trained frame's camera: the model the run started from, else the trained views'
-        // (the datasets use one camera), at this image's size. The dataset's own intrinsics
-        // belong to its frame, not necessarily to the one the result was trained in.
+        // The trained frame's camera: the model the run started from (with the focal factor
+        // training learned), else the trained views' (the datasets use one camera), at this
+        // image's size. The dataset's own intrinsics belong to its frame, not necessarily to
+        // the one the result was trained in.
+        let model_k = model_k.map(|k| k.with_focal_scaled(output.focal_factor));
         let k = match model_k.or_else(|| output.views.first().map(|v| v.intrinsics)) {
             Some(k) => k.resized(s.width, s.height),
             None => continue,

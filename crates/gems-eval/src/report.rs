@@ -571,6 +571,13 @@ fn metrics_section(html: &mut String, m: &MetricsReport) {
         }
         None => html.push_str("<h3>APE</h3><p>Not available (no ground-truth poses).</p>\n"),
     }
+    if let Some(f) = &m.focal {
+        let _ = writeln!(
+            html,
+            "<h3>Focal length (x, pixels at the training size)</h3><p>{}.</p>",
+            esc(&f.describe())
+        );
+    }
     if let Some(r) = &m.rotation_error {
         let _ = writeln!(
             html,

@@ -97,6 +97,11 @@ fn metrics_json_round_trip_and_keys() {
             max_deg: 3.0,
         }),
         rotation_error_init: None,
+        focal: Some(FocalSummary {
+            initial_px: 146.5,
+            trained_px: 170.25,
+            scene_px: Some(173.2),
+        }),
         steps: 7000,
         seconds: 12.5,
         gaussians: 1234,
@@ -134,6 +139,7 @@ fn metrics_json_round_trip_and_keys() {
         "ape",
         "ape_init",
         "rotation_error",
+        "focal",
         "steps",
         "seconds",
         "gaussians",
@@ -299,6 +305,11 @@ fn report_writes_html_and_figures() {
             median_deg: 5.9,
             max_deg: 9.5,
         }),
+        focal: Some(FocalSummary {
+            initial_px: 146.5,
+            trained_px: 170.25,
+            scene_px: Some(173.2),
+        }),
         steps: 10,
         seconds: 1.0,
         gaussians: 5,
@@ -398,6 +409,11 @@ fn report_writes_html_and_figures() {
     // blurry 0.2 vs gt 0.9: 20·log10(1/0.7) = 3.10 dB; ours 0.5: 7.96 dB
     assert!(html.contains("3.10 dB") && html.contains("7.96 dB"));
     assert!(html.contains("RMSE 2.345°") && html.contains("RMSE 6.789°"));
+    assert!(
+        html.contains("146.5 px at the start, 170.2 px trained")
+            && html.contains("173.2 px: -15.42 % at the start, -1.70 % trained"),
+        "the focal line"
+    );
 
     // Ground-truth sub-frame paths are drawn as green lines beside the estimate.
     let green = |dir: &std::path::Path| {

@@ -65,6 +65,7 @@ fn output(mid_noise: f64) -> (TrainOutput, EvalData) {
         },
         seconds: 3.0,
         steps: 50,
+        focal_factor: 1.0,
         pose_model: None,
         run: None,
     };

@@ -53,6 +53,7 @@ fn trained_on(scene: &gems_data::Scene, factor: u32, cfg_fov: f64) -> TrainOutpu
         history: Default::default(),
         seconds: 0.0,
         steps: 0,
+        focal_factor: 1.0,
         pose_model: None,
         run: None,
     }

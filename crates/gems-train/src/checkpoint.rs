@@ -12,7 +12,7 @@ use crate::TrainError;
 use crate::adam::{AdamState, GaussianAdam};
 use crate::config::TrainConfig;
 use crate::tensors::{TensorReader, TensorSet, add_gaussians, format_err, read, read_gaussians};
-use crate::trainer::{History, TrainState, Trainer};
+use crate::trainer::{FocalState, History, TrainState, Trainer};
 
 /// Non-tensor part of a checkpoint.
 #[derive(Serialize, Deserialize)]
@@ -32,6 +32,9 @@ struct CheckpointMeta {
     /// configured count.
     #[serde(default)]
     blur_depths: Vec<Option<[f32; 2]>>,
+    /// Absent in checkpoints written before the focal was learned: factor 1.
+    #[serde(default)]
+    focal: FocalState,
     seconds: f64,
     config: TrainConfig,
 }
@@ -92,6 +95,7 @@ pub fn save_checkpoint(dir: &Path, t: &Trainer) -> Result<(), TrainError> {
         order_pos: s.order_pos,
         history: s.history.clone(),
         blur_depths: s.blur_depths.clone(),
+        focal: s.focal.clone(),
         seconds: s.seconds,
         config: t.cfg.clone(),
     };
@@ -168,6 +172,7 @@ pub fn load_checkpoint(dir: &Path) -> Result<(TrainConfig, TrainState), TrainErr
         order_pos: meta.order_pos,
         history: meta.history,
         blur_depths: meta.blur_depths,
+        focal: meta.focal,
         seconds: meta.seconds,
     };
     Ok((meta.config, state))

@@ -127,6 +127,14 @@ pub struct PoseConfig {
     /// (BENCHMARKS.md, "Keeping accurate cameras"): for accurate starts only
     /// (`configs/accurate-cameras.toml`).
     pub anchor_weight: f64,
+    /// Adam learning rate of the log of one factor on every view's focal lengths (a shared
+    /// zoom about the principal points), learned from the photometric loss with the
+    /// trajectories and decayed as their lr: an SfM's focal estimated from blurred photos can
+    /// be 10–30 % off (BENCHMARKS.md, "Initialisation"), which no pose can make up for. The
+    /// trained focal is the one every output (cameras, renders, evaluation) uses. 0 = the
+    /// initial focal is kept (the GeMS paper), the default (BENCHMARKS.md, "Learning the focal
+    /// length").
+    pub focal_lr: f32,
 }
 
 impl Default for PoseConfig {
@@ -143,6 +151,7 @@ impl Default for PoseConfig {
             off_centre_target: gems_math::PathCentre::Mean,
             straight_fraction: 0.0,
             anchor_weight: 0.0,
+            focal_lr: 0.0,
         }
     }
 }
@@ -492,6 +501,9 @@ impl TrainConfig {
         if !(self.pose.uneven_speed_weight.is_finite() && self.pose.uneven_speed_weight >= 0.0) {
             return Err("pose.uneven_speed_weight must be finite and >= 0".into());
         }
+        if !(self.pose.focal_lr.is_finite() && self.pose.focal_lr >= 0.0) {
+            return Err("pose.focal_lr must be finite and >= 0".into());
+        }
         if !(self.pose.anchor_weight.is_finite() && self.pose.anchor_weight >= 0.0) {
             return Err("pose.anchor_weight must be finite and >= 0".into());
         }
@@ -609,6 +621,16 @@ impl TrainConfig {
     /// Trajectory lr at `step`.
     pub fn pose_lr(&self, step: usize) -> f32 {
         exp_decay(self.pose.lr, self.pose.lr_final_factor, step, self.steps)
+    }
+
+    /// Learning rate of the log focal factor at `step` (`pose.focal_lr`, decayed as the poses').
+    pub fn focal_lr(&self, step: usize) -> f32 {
+        exp_decay(
+            self.pose.focal_lr,
+            self.pose.lr_final_factor,
+            step,
+            self.steps,
+        )
     }
 
     /// SH degree in use at `step` (gsplat: min(step / interval, max)).

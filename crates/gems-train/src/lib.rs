@@ -57,8 +57,8 @@ pub use normalize::Normalization;
 pub use output::{MODEL_JSON, MODEL_TENSORS, RunDescription, TrainOutput, ViewResult};
 pub use prepare::{InitMode, prepare_input};
 pub use trainer::{
-    GpuMemory, GpuProfile, History, StepReport, TrainInput, TrainState, TrainView, Trainer,
-    trajectory_of,
+    FocalState, GpuMemory, GpuProfile, History, StepReport, TrainInput, TrainState, TrainView,
+    Trainer, trajectory_of,
 };
 
 use std::path::{Path, PathBuf};

@@ -18,6 +18,7 @@ use crate::trainer::{History, TrainView, Trainer};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ViewResult {
     pub name: String,
+    /// The camera as trained (the initial one times the learned focal factor).
     pub intrinsics: Intrinsics,
     pub c2w_init: Pose,
     /// Ground truth for APE: the scene's explicit pose, else the mid sub-frame of its sub-frame
@@ -85,6 +86,10 @@ pub struct TrainOutput {
     pub history: History,
     pub seconds: f64,
     pub steps: usize,
+    /// The learned factor on the initial focal lengths (`pose.focal_lr`; 1 when not learned):
+    /// the views' intrinsics already include it, a camera taken from the initial model does
+    /// not.
+    pub focal_factor: f64,
     /// The COLMAP model the initial poses came from, if any. Held-out views are evaluated from
     /// its poses (through the same normalisation), never from poses of another frame.
     pub pose_model: Option<PathBuf>,
@@ -105,10 +110,17 @@ struct OutputMeta {
     history: History,
     seconds: f64,
     steps: usize,
+    #[serde(default = "unit_factor")]
+    focal_factor: f64,
     #[serde(default)]
     pose_model: Option<PathBuf>,
     #[serde(default)]
     run: Option<RunDescription>,
+}
+
+/// The focal factor of outputs written before the focal was learned.
+fn unit_factor() -> f64 {
+    1.0
 }
 
 pub const MODEL_TENSORS: &str = "model.safetensors";
@@ -129,7 +141,7 @@ impl TrainOutput {
                 let traj = t.trajectory(v);
                 ViewResult {
                     name: view.name.clone(),
-                    intrinsics: view.intrinsics,
+                    intrinsics: t.intrinsics(v),
                     c2w_init: Pose::from(&view.c2w_init),
                     c2w_gt: view.c2w_gt.as_ref().map(Pose::from),
                     c2w_gt_subframes: view.c2w_gt_subframes.iter().map(Pose::from).collect(),
@@ -149,6 +161,7 @@ impl TrainOutput {
             history: t.state.history.clone(),
             seconds: t.state.seconds,
             steps: t.state.step,
+            focal_factor: t.state.focal.factor(),
             pose_model: None,
             run: None,
         }
@@ -181,6 +194,7 @@ impl TrainOutput {
             history: self.history.clone(),
             seconds: self.seconds,
             steps: self.steps,
+            focal_factor: self.focal_factor,
             pose_model: self.pose_model.clone(),
             run: self.run.clone(),
         };
@@ -223,6 +237,7 @@ impl TrainOutput {
             history: meta.history,
             seconds: meta.seconds,
             steps: meta.steps,
+            focal_factor: meta.focal_factor,
             pose_model: meta.pose_model,
             run: meta.run,
         })

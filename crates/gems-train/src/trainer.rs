@@ -117,8 +117,34 @@ pub struct TrainState {
     /// depend on where the Gaussians are (host or GPU). `None` (or empty, in checkpoints written
     /// before counts adapted): the view always renders `num_virtual_views`.
     pub blur_depths: Vec<Option<[f32; 2]>>,
+    /// The learned focal factor (`pose.focal_lr`).
+    pub focal: FocalState,
     /// Wall-clock training seconds so far (excluded from bit-identity).
     pub seconds: f64,
+}
+
+/// The learned focal factor: `exp(log_scale)` multiplies every view's focal lengths, and Adam
+/// steps on `log_scale` (so the factor stays positive and its steps are relative).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FocalState {
+    pub log_scale: f32,
+    pub adam: AdamState,
+}
+
+impl Default for FocalState {
+    fn default() -> Self {
+        Self {
+            log_scale: 0.0,
+            adam: AdamState::new(1, 1),
+        }
+    }
+}
+
+impl FocalState {
+    /// The factor on the initial focal lengths.
+    pub fn factor(&self) -> f64 {
+        f64::from(self.log_scale).exp()
+    }
 }
 
 /// What one step reports.
@@ -230,6 +256,8 @@ pub struct Trainer {
     ws: BlurWorkspace,
     d_blurred: Vec<f32>,
     knot_grads: Vec<[f64; 6]>,
+    /// dL/d(log focal factor) of the current step.
+    focal_grad: f64,
     binoms: BinomialTable,
     times: Vec<f64>,
     /// `coarse[l − 1][v]`: view `v` area-averaged `l` octaves down with its intrinsics, for
@@ -275,20 +303,23 @@ fn fitting_levels(levels: u32, views: &[TrainView]) -> u32 {
         .count() as u32
 }
 
-/// The intrinsics and target image of view `v` at `level` octaves below full resolution.
+/// The intrinsics (focal lengths times `focal_factor`) and target image of view `v` at
+/// `level` octaves below full resolution.
 fn view_at_level<'a>(
     views: &'a [TrainView],
     coarse: &'a [Vec<(Intrinsics, Vec<f32>)>],
     v: usize,
     level: u32,
+    focal_factor: f64,
 ) -> (Intrinsics, &'a [f32]) {
-    match level {
-        0 => (views[v].intrinsics, &views[v].image),
+    let (k, image) = match level {
+        0 => (views[v].intrinsics, views[v].image.as_slice()),
         l => {
             let (k, image) = &coarse[l as usize - 1][v];
-            (*k, image)
+            (*k, image.as_slice())
         }
-    }
+    };
+    (k.with_focal_scaled(focal_factor), image)
 }
 
 impl Trainer {
@@ -300,6 +331,14 @@ impl Trainer {
     /// The training views, in the normalised frame.
     pub fn views(&self) -> &[TrainView] {
         &self.views
+    }
+
+    /// View `v`'s camera as trained: its initial intrinsics with the learned focal factor
+    /// (`pose.focal_lr`; the initial ones when it is 0).
+    pub fn intrinsics(&self, v: usize) -> Intrinsics {
+        self.views[v]
+            .intrinsics
+            .with_focal_scaled(self.state.focal.factor())
     }
 
     /// Steps taken so far.
@@ -353,6 +392,7 @@ impl Trainer {
             order_pos: 0,
             history: History::default(),
             blur_depths,
+            focal: FocalState::default(),
             seconds: 0.0,
         };
         let mut t = Self::assemble(
@@ -423,6 +463,7 @@ impl Trainer {
             rng: ChaCha8Rng::seed_from_u64(cfg.seed),
             times,
             knot_grads: vec![[0.0; 6]; k],
+            focal_grad: 0.0,
             cfg,
             views,
             normalization,
@@ -611,7 +652,13 @@ impl Trainer {
             return self.times.clone();
         };
         let level = self.resolution_level(step);
-        let (k, _) = view_at_level(&self.views, &self.coarse, v, level);
+        let (k, _) = view_at_level(
+            &self.views,
+            &self.coarse,
+            v,
+            level,
+            self.state.focal.factor(),
+        );
         let length = crate::blur_length_px(&self.views[v].c2w_init, traj, &k, depths);
         let n = crate::virtual_view_count(
             length,
@@ -758,9 +805,10 @@ impl Trainer {
         step: usize,
     ) -> Result<(f32, f32, f32), TrainError> {
         let level = self.resolution_level(step);
-        let (k, _) = view_at_level(&self.views, &self.coarse, v, level);
+        let focal = self.state.focal.factor();
+        let (k, _) = view_at_level(&self.views, &self.coarse, v, level, focal);
         let li = self.loss_for(k.width, k.height)?;
-        let (_, image) = view_at_level(&self.views, &self.coarse, v, level);
+        let (_, image) = view_at_level(&self.views, &self.coarse, v, level, focal);
         let view = &self.views[v];
         let exposure = Exposure {
             c2w_init: &view.c2w_init,
@@ -807,6 +855,7 @@ impl Trainer {
             &mut self.ws,
             &mut self.knot_grads,
         )?;
+        self.focal_grad = log_focal_gradient(&self.ws.cams, &grads.cam_focal);
         let reg = add_regularizers(&self.cfg, &self.state.gaussians, &mut grads);
         self.adam_gaussians(&grads, step);
         Ok((lv.loss + reg, lv.loss, train_psnr))
@@ -830,7 +879,13 @@ impl Trainer {
             ));
         };
         let view = &self.views[v];
-        let (k, image) = view_at_level(&self.views, &self.coarse, v, level);
+        let (k, image) = view_at_level(
+            &self.views,
+            &self.coarse,
+            v,
+            level,
+            self.state.focal.factor(),
+        );
         virtual_cameras(
             &Exposure {
                 c2w_init: &view.c2w_init,
@@ -859,6 +914,7 @@ impl Trainer {
             &out.cam_translation,
             &mut self.knot_grads,
         );
+        self.focal_grad = log_focal_gradient(&self.ws.cams, &out.cam_focal);
         Ok((out.loss, out.photometric_loss, out.psnr))
     }
 
@@ -908,6 +964,22 @@ impl Trainer {
     fn pose_update(&mut self, v: usize, step: usize) {
         if !self.cfg.pose.optimize {
             return;
+        }
+        if self.cfg.pose.focal_lr > 0.0 {
+            let c = &self.cfg;
+            let h = AdamHyper {
+                beta1: c.adam_beta1,
+                beta2: c.adam_beta2,
+                eps: c.adam_eps,
+            };
+            let f = &mut self.state.focal;
+            f.adam.step(
+                std::slice::from_mut(&mut f.log_scale),
+                &[self.focal_grad as f32],
+                c.focal_lr(step),
+                0.0,
+                h,
+            );
         }
         let k = self.cfg.num_knots();
         let acc = &mut self.state.knot_grad_acc[v * k * 6..(v + 1) * k * 6];
@@ -985,6 +1057,16 @@ impl Trainer {
         let cam = Camera::from_c2w(k, c2w);
         self.renderer.render(&g, &[cam], &[[0.0; 3]])
     }
+}
+
+/// dL/d(log of the focal factor) from the renderer's per-camera (dL/dfx, dL/dfy): the
+/// derivative of f·s with respect to log s at s = 1 is f, so it is Σ fx·dL/dfx + fy·dL/dfy.
+fn log_focal_gradient(cams: &[Camera], d_focal: &[[f32; 2]]) -> f64 {
+    debug_assert_eq!(cams.len(), d_focal.len(), "one focal gradient per camera");
+    cams.iter()
+        .zip(d_focal)
+        .map(|(c, g)| f64::from(c.fx) * f64::from(g[0]) + f64::from(c.fy) * f64::from(g[1]))
+        .sum()
 }
 
 /// Adds the MCMC regularisers' gradients; returns their value.

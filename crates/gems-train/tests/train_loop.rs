@@ -44,6 +44,7 @@ fn same(a: &TrainState, b: &TrainState) {
     assert_eq!(a.rng_word_pos, b.rng_word_pos);
     assert_eq!(a.history, b.history);
     assert_eq!(a.blur_depths, b.blur_depths);
+    assert_eq!(a.focal, b.focal);
 }
 
 #[test]
@@ -147,6 +148,14 @@ fn same_seed_same_result_and_resume_is_bit_identical() {
     let mut every = trainer(&subset);
     every.run(|_, _| Ok(())).unwrap();
     same(every.state().unwrap(), &a);
+    // With the focal learned: the same guarantees (its Adam state is in the checkpoint), and
+    // another result.
+    let mut focal = small_config();
+    focal.pose.focal_lr = 1e-2;
+    let h = check_same_seed_and_resume(&focal);
+    assert_ne!(h.focal.log_scale, 0.0);
+    assert_ne!(a.knots, h.knots);
+    assert_eq!(a.focal, gems_train::FocalState::default());
     // From wide random paths, the energy's weight brings u = ½ nearer the mean pose.
     let mut wide = small_config();
     wide.pose.knot_init_std = 0.05;
@@ -293,4 +302,68 @@ fn output_with_wrong_knot_count_is_refused() {
     std::fs::write(&jpath, serde_json::to_vec(&spline).unwrap()).unwrap();
     let e = TrainOutput::load(dir.path()).unwrap_err().to_string();
     assert!(e.contains("needs 4"), "{e}");
+}
+
+/// Sharp photos rendered at the true focal and given to the trainer 6 % short, with the true
+/// Gaussians and poses held fixed: only the focal factor can explain the difference, and
+/// `pose.focal_lr` learns it; at 0 it stays 1.
+#[test]
+fn a_learned_focal_recovers_one_given_six_percent_short() {
+    let scene = common::blur_scene(3, 32, 24, 0.0, 0.0, 1);
+    let short = 0.94;
+    let views: Vec<_> = scene
+        .views
+        .iter()
+        .map(|v| gems_train::TrainView {
+            intrinsics: v.intrinsics.with_focal_scaled(short),
+            ..v.clone()
+        })
+        .collect();
+    let mut cfg = TrainConfig {
+        steps: 100,
+        num_virtual_views: 1,
+        random_background: false,
+        seed: 3,
+        ..TrainConfig::default()
+    };
+    cfg.lr = gems_train::LearningRates {
+        means: 0.0,
+        log_scales: 0.0,
+        quats: 0.0,
+        opacities: 0.0,
+        sh_dc: 0.0,
+        sh_rest: 0.0,
+        ..cfg.lr
+    };
+    cfg.mcmc.noise_lr = 0.0;
+    cfg.mcmc.refine_every = 1000;
+    cfg.pose.lr = 0.0;
+    cfg.pose.knot_init_std = 1e-9;
+    cfg.coarse_to_fine.levels = 0;
+    let factor = |focal_lr: f32| -> f64 {
+        let mut cfg = cfg.clone();
+        cfg.pose.focal_lr = focal_lr;
+        let mut t = Trainer::new(
+            cfg,
+            TrainInput {
+                views: views.clone(),
+                gaussians: scene.gt.clone(),
+                normalization: Normalization::identity(),
+                scene_scale: 1.0,
+                init_label: "gt".into(),
+            },
+        )
+        .unwrap();
+        t.run(|_, _| Ok(())).unwrap();
+        let f = t.state().unwrap().focal.factor();
+        assert_eq!(t.intrinsics(0), views[0].intrinsics.with_focal_scaled(f));
+        f
+    };
+    assert_eq!(factor(0.0), 1.0);
+    let learned = factor(1e-2);
+    let truth = 1.0 / short;
+    assert!(
+        (learned - truth).abs() < 0.2 * (truth - 1.0),
+        "learned factor {learned}, truth {truth}"
+    );
 }

@@ -124,6 +124,9 @@ pub fn print_splits(m: &gems_eval::MetricsReport) {
     if let Some(line) = rotation_error_line(m) {
         println!("{line}");
     }
+    if let Some(f) = &m.focal {
+        println!("focal length (x): {}", f.describe());
+    }
 }
 
 /// The relative rotation error of the trajectory midpoints (and of the initial poses), when the
