@@ -156,6 +156,7 @@ pub fn rerun_init_on_renders(
     out: &Path,
     req: &InitRequest,
     seed: u64,
+    learned_focal_prior: f64,
 ) -> Result<PathBuf, PipelineError> {
     let source = gems_fs::image_folder(source);
     let files = gems_fs::list_images(&source)?;
@@ -172,6 +173,31 @@ pub fn rerun_init_on_renders(
             .and_then(|p| gems_data::image::image_dimensions(p).ok())
     };
     let renders = gems_eval::render_mid_exposure(engine, first, &sizes)?;
+    // The renders are made with the focal the first pass learned (`pose.focal_lr`): the SfM on
+    // them starts from it, at the photos' size, under the prior `learned_focal_prior` (0 holds
+    // it), instead of searching for one again.
+    let learned = (first.focal_factor != 1.0)
+        .then(|| {
+            first.views.iter().find_map(|v| {
+                let (w, _) = sizes(&v.name)?;
+                Some(v.intrinsics.fx * f64::from(w) / f64::from(v.intrinsics.width))
+            })
+        })
+        .flatten();
+    let (focal_px, focal_prior) = match learned {
+        Some(f) => {
+            tracing::info!(
+                focal_px = f,
+                factor = first.focal_factor,
+                "the SfM on the renders starts from the focal the first pass learned"
+            );
+            (
+                Some(f),
+                (learned_focal_prior > 0.0).then_some(learned_focal_prior),
+            )
+        }
+        None => (req.focal_px, req.focal_prior),
+    };
     let images = out.join("images");
     // A folder left by an earlier, unfinished run may hold other views.
     if images.is_dir() {
@@ -210,9 +236,9 @@ pub fn rerun_init_on_renders(
         "initialising again on the first pass's sharp renders"
     );
     let model = match req.init {
-        Init::ColmapCli => run_colmap(out, out, &req.colmap_binary, req.focal_px)?,
+        Init::ColmapCli => run_colmap(out, out, &req.colmap_binary, focal_px)?,
         Init::Sfm | Init::Colmap | Init::Gt | Init::GtNoisy => {
-            run_sfm(out, out, seed, req.focal_px, req.focal_prior)?
+            run_sfm(out, out, seed, focal_px, focal_prior)?
         }
     };
     if renamed.iter().any(|(written, name)| written != name) {

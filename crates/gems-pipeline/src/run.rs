@@ -109,6 +109,12 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
     }
     let mut mode = resolve_init(&req.scene, &req.output, &init, req.cfg.seed, req.resume)?;
     let mut cfg = req.cfg;
+    if cfg.pose.focal_lr > 0.0
+        && let Some(why) = focal_is_known(&init)
+    {
+        tracing::info!("the focal is not learned ({why}): pose.focal_lr applies to estimated ones");
+        cfg.pose.focal_lr = 0.0;
+    }
     if init.init == Init::Gt {
         // Exact initial poses: straight paths first (`init.accurate_poses_straight_fraction`).
         cfg.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
@@ -170,8 +176,15 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             )?;
             engine = back;
             let source = init_images(&req.scene, &req.output, &init)?;
-            let second =
-                rerun_init_on_renders(&mut engine, &first, &source, &rerun, &init, cfg.seed);
+            let second = rerun_init_on_renders(
+                &mut engine,
+                &first,
+                &source,
+                &rerun,
+                &init,
+                cfg.seed,
+                cfg.init.exif_focal_prior,
+            );
             let rendered: Vec<String> = first.views.iter().map(|v| v.name.clone()).collect();
             let choice = if !accept_rerun(second, &mode, &rerun, &rendered)? {
                 RerunChoice::without_probes(
@@ -255,6 +268,20 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         run: Some(description),
         started,
     })
+}
+
+/// Why the initialisation's focal is to be kept as it is (`pose.focal_lr` then does not apply),
+/// or `None` when it was estimated: by the built-in SfM or COLMAP without a focal, or from an
+/// EXIF focal under its prior.
+fn focal_is_known(init: &InitRequest) -> Option<&'static str> {
+    match init.init {
+        Init::Gt | Init::GtNoisy => Some("ground-truth cameras"),
+        Init::Colmap => Some("a COLMAP model's camera"),
+        Init::Sfm | Init::ColmapCli if init.focal_px.is_some() && init.focal_prior.is_none() => {
+            Some("given on the command line")
+        }
+        Init::Sfm | Init::ColmapCli => None,
+    }
 }
 
 /// The configuration of the run proper after a first pass, from the run's `cfg`: from the

@@ -328,3 +328,56 @@ fn sfm_rerun_keeps_the_renders_model_only_as_its_probe_says() {
         "a resumed run with a choice does not train the first pass again"
     );
 }
+
+/// `pose.focal_lr` learns an estimated focal, and the SfM on the first pass's renders starts
+/// from the learned one (here held there: `init.exif_focal_prior = 0`); a focal given on the
+/// command line is kept.
+#[test]
+fn a_learned_focal_starts_the_renders_sfm_and_a_given_focal_is_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene");
+    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    let run = |out: &std::path::Path, init: InitRequest| {
+        let mut req = request(&scene, out, init);
+        req.cfg.pose.focal_lr = 1e-2;
+        req.cfg.init.exif_focal_prior = 0.0;
+        req.cfg.init.sfm_rerun_fraction = 0.5;
+        req.cfg.init.sfm_rerun_min_steps = 1;
+        req.evaluate = false;
+        req.open.hold = Some(0);
+        train_scene(req).unwrap();
+        (
+            gems_train::TrainOutput::load(&out.join("first_pass")).unwrap(),
+            gems_train::TrainOutput::load(out).unwrap(),
+        )
+    };
+    let photo_width = {
+        let first = gems_fs::list_images(&scene.join("images")).unwrap()[0].clone();
+        gems_data::load_image(&first).unwrap().width
+    };
+    let model_focal = |out: &std::path::Path| {
+        let m =
+            gems_data::colmap::read_model(&out.join("sfm_rerun").join("sparse").join("0")).unwrap();
+        m.cameras[0].intrinsics().unwrap().fx
+    };
+
+    let out = dir.path().join("learned");
+    let (first, proper) = run(&out, InitRequest::new(Init::Sfm));
+    assert_ne!(first.focal_factor, 1.0, "the first pass learns the focal");
+    assert_ne!(proper.focal_factor, 1.0, "and so does the run proper");
+    let v = &first.views[0];
+    let learned = v.intrinsics.fx * f64::from(photo_width) / f64::from(v.intrinsics.width);
+    let started = model_focal(&out);
+    assert!(
+        (started - learned).abs() < 1e-6 * learned,
+        "the renders' SfM held {started}, the first pass learned {learned}"
+    );
+
+    let mut given = InitRequest::new(Init::Sfm);
+    given.focal_px = Some(learned);
+    let out = dir.path().join("given");
+    let (first, proper) = run(&out, given);
+    assert_eq!((first.focal_factor, proper.focal_factor), (1.0, 1.0));
+    assert_eq!(first.config.pose.focal_lr, 0.0);
+    assert!((model_focal(&out) - learned).abs() < 1e-6 * learned);
+}
