@@ -146,6 +146,21 @@ fn template(src: &Gray, p: [f32; 2], m: &Warp, half: i32, out: &mut Vec<f32>) ->
     normalise(out)
 }
 
+/// Mean and 1/‖win − mean‖ of a sampled window (what the Gauss–Newton steps compare with a
+/// normalised template), or `None` for a flat window.
+fn mean_and_inverse_norm(win: &[f32]) -> Option<(f32, f32)> {
+    let mean = win.iter().sum::<f32>() / win.len() as f32;
+    let norm = win
+        .iter()
+        .map(|v| (v - mean) * (v - mean))
+        .sum::<f32>()
+        .sqrt();
+    if norm < 1e-6 {
+        return None;
+    }
+    Some((mean, 1.0 / norm))
+}
+
 fn normalise(v: &mut [f32]) -> bool {
     let mean = v.iter().sum::<f32>() / v.len() as f32;
     let mut n = 0.0;
@@ -341,20 +356,11 @@ fn refine_lk(img: &Gray, start: [f32; 2], half: i32, tmpl: &[f32]) -> Option<[f3
                 k += 1;
             }
         }
-        let mean = win[..n].iter().sum::<f32>() / n as f32;
+        let (mean, inv) = mean_and_inverse_norm(&win[..n])?;
         let (mgx, mgy) = (
             gx[..n].iter().sum::<f32>() / n as f32,
             gy[..n].iter().sum::<f32>() / n as f32,
         );
-        let norm = win[..n]
-            .iter()
-            .map(|v| (v - mean) * (v - mean))
-            .sum::<f32>()
-            .sqrt();
-        if norm < 1e-6 {
-            return None;
-        }
-        let inv = 1.0 / norm;
         let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
         for i in 0..n {
             let r = (win[i] - mean) * inv - tmpl[i];
@@ -410,22 +416,13 @@ fn refine_lk_affine(img: &Gray, start: [f32; 2], half: i32, tmpl: &[f32]) -> Opt
                 k += 1;
             }
         }
-        let mean = win[..n].iter().sum::<f32>() / n as f32;
+        let (mean, inv) = mean_and_inverse_norm(&win[..n])?;
         let mut jmean = [0.0f32; 6];
         for j in &jac[..n] {
             for c in 0..6 {
                 jmean[c] += j[c] / n as f32;
             }
         }
-        let norm = win[..n]
-            .iter()
-            .map(|v| (v - mean) * (v - mean))
-            .sum::<f32>()
-            .sqrt();
-        if norm < 1e-6 {
-            return None;
-        }
-        let inv = 1.0 / norm;
         let mut a = Matrix6::<f64>::zeros();
         let mut g = Vector6::<f64>::zeros();
         for i in 0..n {
