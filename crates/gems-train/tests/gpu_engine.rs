@@ -38,15 +38,7 @@ fn frozen_config(seed: u64, steps: usize) -> TrainConfig {
     cfg.mcmc.noise_lr = 0.0;
     cfg.random_background = false;
     cfg.pose.optimize = false;
-    cfg.lr = gems_train::LearningRates {
-        means: 0.0,
-        log_scales: 0.0,
-        quats: 0.0,
-        opacities: 0.0,
-        sh_dc: 0.0,
-        sh_rest: 0.0,
-        ..cfg.lr
-    };
+    common::freeze_gaussians(&mut cfg);
     cfg
 }
 
@@ -395,39 +387,15 @@ fn resident_losses_follow_the_cpu_engine_when_view_counts_adapt() {
 /// factor back to within 1 % of each other and of the truth.
 #[test]
 fn resident_gpu_learns_the_focal_as_the_cpu_engine_does() {
-    let scene = common::blur_scene(3, 32, 24, 0.0, 0.0, 1);
-    let short = 0.94;
-    let mut cfg = frozen_config(3, 100);
-    cfg.num_virtual_views = 1;
-    cfg.mcmc.refine_every = 1000;
-    cfg.coarse_to_fine.levels = 0;
-    cfg.pose.optimize = true;
-    cfg.pose.lr = 0.0;
-    cfg.pose.knot_init_std = 1e-9;
-    cfg.pose.focal_lr = 1e-2;
     let run = |engine: Engine| -> f64 {
-        let views = scene
-            .views
-            .iter()
-            .map(|v| gems_train::TrainView {
-                intrinsics: v.intrinsics.with_focal_scaled(short),
-                ..v.clone()
-            })
-            .collect();
-        let input = TrainInput {
-            views,
-            gaussians: scene.gt.clone(),
-            normalization: Normalization::identity(),
-            scene_scale: 1.0,
-            init_label: "gt".into(),
-        };
-        let mut t = Trainer::new(cfg.clone(), input).unwrap();
+        let mut t =
+            Trainer::new(common::focal_only_config(1e-2), common::short_focal_input()).unwrap();
         t.set_engine(engine);
         t.run(|_, _| Ok(())).unwrap();
         t.state().unwrap().focal.factor()
     };
     let (cpu, gpu_factor) = (run(Engine::cpu()), run(gpu()));
-    let truth = 1.0 / short;
+    let truth = 1.0 / common::SHORT_FOCAL;
     eprintln!("focal factor: CPU {cpu}, GPU {gpu_factor}, truth {truth}");
     assert!(
         (cpu - gpu_factor).abs() < 0.01 * truth,

@@ -309,59 +309,18 @@ fn output_with_wrong_knot_count_is_refused() {
 /// `pose.focal_lr` learns it; at 0 it stays 1.
 #[test]
 fn a_learned_focal_recovers_one_given_six_percent_short() {
-    let scene = common::blur_scene(3, 32, 24, 0.0, 0.0, 1);
-    let short = 0.94;
-    let views: Vec<_> = scene
-        .views
-        .iter()
-        .map(|v| gems_train::TrainView {
-            intrinsics: v.intrinsics.with_focal_scaled(short),
-            ..v.clone()
-        })
-        .collect();
-    let mut cfg = TrainConfig {
-        steps: 100,
-        num_virtual_views: 1,
-        random_background: false,
-        seed: 3,
-        ..TrainConfig::default()
-    };
-    cfg.lr = gems_train::LearningRates {
-        means: 0.0,
-        log_scales: 0.0,
-        quats: 0.0,
-        opacities: 0.0,
-        sh_dc: 0.0,
-        sh_rest: 0.0,
-        ..cfg.lr
-    };
-    cfg.mcmc.noise_lr = 0.0;
-    cfg.mcmc.refine_every = 1000;
-    cfg.pose.lr = 0.0;
-    cfg.pose.knot_init_std = 1e-9;
-    cfg.coarse_to_fine.levels = 0;
     let factor = |focal_lr: f32| -> f64 {
-        let mut cfg = cfg.clone();
-        cfg.pose.focal_lr = focal_lr;
-        let mut t = Trainer::new(
-            cfg,
-            TrainInput {
-                views: views.clone(),
-                gaussians: scene.gt.clone(),
-                normalization: Normalization::identity(),
-                scene_scale: 1.0,
-                init_label: "gt".into(),
-            },
-        )
-        .unwrap();
+        let input = common::short_focal_input();
+        let given = input.views[0].intrinsics;
+        let mut t = Trainer::new(common::focal_only_config(focal_lr), input).unwrap();
         t.run(|_, _| Ok(())).unwrap();
         let f = t.state().unwrap().focal.factor();
-        assert_eq!(t.intrinsics(0), views[0].intrinsics.with_focal_scaled(f));
+        assert_eq!(t.intrinsics(0), given.with_focal_scaled(f));
         f
     };
     assert_eq!(factor(0.0), 1.0);
     let learned = factor(1e-2);
-    let truth = 1.0 / short;
+    let truth = 1.0 / common::SHORT_FOCAL;
     assert!(
         (learned - truth).abs() < 0.2 * (truth - 1.0),
         "learned factor {learned}, truth {truth}"

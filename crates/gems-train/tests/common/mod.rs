@@ -233,3 +233,60 @@ pub fn init_gaussians(scene: &BlurScene, jitter: f32, seed: u64) -> Gaussians {
     };
     gems_train::from_points(&pts, &cols, &cfg, 3, &mut rng).unwrap()
 }
+
+/// Sets every Gaussian learning rate to 0 (the Gaussians stay as given).
+pub fn freeze_gaussians(cfg: &mut gems_train::TrainConfig) {
+    cfg.lr = gems_train::LearningRates {
+        means: 0.0,
+        log_scales: 0.0,
+        quats: 0.0,
+        opacities: 0.0,
+        sh_dc: 0.0,
+        sh_rest: 0.0,
+        ..cfg.lr
+    };
+}
+
+/// Focal factor by which [`short_focal_input`] understates the focal.
+pub const SHORT_FOCAL: f64 = 0.94;
+
+/// Sharp photos of a [`blur_scene`] (no motion, exact poses) with its true Gaussians, given to
+/// the trainer with every focal [`SHORT_FOCAL`] times the one they were rendered at.
+pub fn short_focal_input() -> gems_train::TrainInput {
+    let scene = blur_scene(3, 32, 24, 0.0, 0.0, 1);
+    let views = scene
+        .views
+        .iter()
+        .map(|v| gems_train::TrainView {
+            intrinsics: v.intrinsics.with_focal_scaled(SHORT_FOCAL),
+            ..v.clone()
+        })
+        .collect();
+    gems_train::TrainInput {
+        views,
+        gaussians: scene.gt,
+        normalization: gems_train::Normalization::identity(),
+        scene_scale: 1.0,
+        init_label: "gt".into(),
+    }
+}
+
+/// 100 steps that can change only the focal factor (`focal_lr`): Gaussians, poses, noise and
+/// refinement off, one virtual view, black background, full size throughout.
+pub fn focal_only_config(focal_lr: f32) -> gems_train::TrainConfig {
+    let mut cfg = gems_train::TrainConfig {
+        steps: 100,
+        num_virtual_views: 1,
+        random_background: false,
+        seed: 3,
+        ..gems_train::TrainConfig::default()
+    };
+    freeze_gaussians(&mut cfg);
+    cfg.mcmc.noise_lr = 0.0;
+    cfg.mcmc.refine_every = 1000;
+    cfg.pose.lr = 0.0;
+    cfg.pose.knot_init_std = 1e-9;
+    cfg.pose.focal_lr = focal_lr;
+    cfg.coarse_to_fine.levels = 0;
+    cfg
+}
