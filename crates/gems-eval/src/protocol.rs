@@ -480,28 +480,8 @@ fn held_out_reference<'a>(
 /// cameras of the same views, each set after its own best similarity to them (so a change of
 /// frame, scale or gauge counts for nothing, a change of shape for everything).
 fn camera_shift(initial: &[(Se3, Se3)], trained: &[(Se3, Se3)]) -> Option<CameraShift> {
-    let residual = |pairs: &[(Se3, Se3)]| -> Option<(f64, f64)> {
-        let sim = gems_math::camera_similarity(pairs)?;
-        let centres: Vec<_> = pairs.iter().map(|(_, b)| b.trans).collect();
-        let extent = centres
-            .iter()
-            .flat_map(|a| centres.iter().map(move |b| (a - b).norm()))
-            .fold(0.0, f64::max);
-        if extent <= 0.0 {
-            return None;
-        }
-        let n = pairs.len() as f64;
-        let (c, r) = pairs.iter().fold((0.0, 0.0), |(c, r), (a, b)| {
-            let a = sim.act_c2w(a);
-            let dr = gems_math::So3::from_matrix_orthonormalized(&(a.rot.transpose() * b.rot))
-                .log()
-                .norm();
-            (
-                c + (a.trans - b.trans).norm_squared(),
-                r + dr.to_degrees().powi(2),
-            )
-        });
-        Some((100.0 * (c / n).sqrt() / extent, (r / n).sqrt()))
+    let residual = |pairs: &[(Se3, Se3)]| {
+        gems_math::camera_discrepancy(pairs).map(|d| (d.centre_pct, d.rotation_deg))
     };
     let (centre_pct, rotation_deg) = residual(trained)?;
     let (initial_centre_pct, initial_rotation_deg) = residual(initial)?;

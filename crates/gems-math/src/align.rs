@@ -120,6 +120,45 @@ pub fn camera_similarity(pairs: &[(Se3, Se3)]) -> Option<Sim3> {
     })
 }
 
+/// How far one set of cameras lies from another after the first's best similarity onto the
+/// second ([`camera_similarity`]), so that a change of frame, scale or gauge counts for nothing
+/// and a change of shape for everything.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraDiscrepancy {
+    /// RMSE of the centres, in % of the second set's extent (its largest centre distance).
+    pub centre_pct: f64,
+    /// RMSE of the relative rotations, in degrees.
+    pub rotation_deg: f64,
+}
+
+/// The [`CameraDiscrepancy`] of the pairs `(in A, in B)` (camera-to-world poses): A carried onto
+/// B. `None` where the similarity is undetermined or B's centres coincide.
+pub fn camera_discrepancy(pairs: &[(Se3, Se3)]) -> Option<CameraDiscrepancy> {
+    let sim = camera_similarity(pairs)?;
+    let extent = pairs
+        .iter()
+        .flat_map(|(_, a)| pairs.iter().map(move |(_, b)| (a.trans - b.trans).norm()))
+        .fold(0.0, f64::max);
+    if extent <= 0.0 {
+        return None;
+    }
+    let n = pairs.len() as f64;
+    let (c, r) = pairs.iter().fold((0.0, 0.0), |(c, r), (a, b)| {
+        let a = sim.act_c2w(a);
+        let dr = So3::from_matrix_orthonormalized(&(a.rot.transpose() * b.rot))
+            .log()
+            .norm();
+        (
+            c + (a.trans - b.trans).norm_squared(),
+            r + dr.to_degrees().powi(2),
+        )
+    });
+    Some(CameraDiscrepancy {
+        centre_pct: 100.0 * (c / n).sqrt() / extent,
+        rotation_deg: (r / n).sqrt(),
+    })
+}
+
 /// Error statistics with evo's definitions (population std, numpy median).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ApeStats {

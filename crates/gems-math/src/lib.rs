@@ -29,7 +29,8 @@ pub mod so3;
 pub mod trajectory;
 
 pub use align::{
-    Alignment, ApeStats, Sim3, ape_translation, camera_similarity, error_stats, umeyama,
+    Alignment, ApeStats, CameraDiscrepancy, Sim3, ape_translation, camera_discrepancy,
+    camera_similarity, error_stats, umeyama,
 };
 pub use camera::{Intrinsics, Pose, rotation_error};
 pub use convert::{

@@ -190,3 +190,43 @@ fn camera_similarity_recovers_a_similarity_from_cameras_on_a_straight_line() {
         .collect();
     assert!(camera_similarity(&same_centre).is_none());
 }
+
+#[test]
+fn camera_discrepancy_ignores_a_similarity_and_measures_a_change_of_shape() {
+    let truth = known_sim();
+    let cameras: Vec<Se3> = (0..6)
+        .map(|i| {
+            let t = i as f64;
+            Se3::new(
+                *So3::exp(&Vector3::new(0.03 * t, 0.1, -0.02 * t)).matrix(),
+                Vector3::new(0.4 * t, 0.1 * t * t, 0.05 * t),
+            )
+        })
+        .collect();
+    let carried: Vec<(Se3, Se3)> = cameras.iter().map(|a| (*a, truth.act_c2w(a))).collect();
+    let d = camera_discrepancy(&carried).unwrap();
+    assert!(d.centre_pct < 1e-10 && d.rotation_deg < 1e-10, "{d:?}");
+    // One camera of six moved by 1 % of B's extent along x, and turned by 0.6° about z: the
+    // similarity refits (it also moves the others), so the RMSE lies between the moved camera's
+    // share, 1/√6 of its move, and the move itself.
+    let extent = carried
+        .iter()
+        .flat_map(|(_, a)| carried.iter().map(move |(_, b)| (a.trans - b.trans).norm()))
+        .fold(0.0, f64::max);
+    let mut moved = carried.clone();
+    let turn = *So3::exp(&Vector3::new(0.0, 0.0, 0.6_f64.to_radians())).matrix();
+    moved[3].1 = Se3::new(
+        turn * moved[3].1.rot,
+        moved[3].1.trans + Vector3::new(0.01 * extent, 0.0, 0.0),
+    );
+    let d = camera_discrepancy(&moved).unwrap();
+    assert!(
+        d.centre_pct > 0.9 / 6f64.sqrt() && d.centre_pct < 1.0,
+        "{d:?}"
+    );
+    assert!(
+        d.rotation_deg > 0.5 / 6f64.sqrt() && d.rotation_deg < 0.6,
+        "{d:?}"
+    );
+    assert!(camera_discrepancy(&carried[..1]).is_none());
+}
