@@ -7,9 +7,11 @@
 //!    deblurring the images by EDI for either initialiser ([`edi_images`], GeMS-E), or ground
 //!    truth (optionally perturbed); with `init.sfm_rerun_fraction` > 0, a first training from
 //!    that model whose sharp renders the image initialiser reconstructs again
-//!    ([`rerun_init_on_renders`]), the run proper starting from the second model (with
-//!    `init.sfm_rerun_probe_fraction` > 0, only when a short probe of each fits the blurry
-//!    photos better from it: [`probe`]); trainings
+//!    ([`rerun_init_on_renders`]), the run proper starting from the second model when its
+//!    cameras are its own — at least `init.sfm_rerun_min_shift_pct` of their extent from the
+//!    first pass's trained ones ([`probe::renders_shift`]) — and, with
+//!    `init.sfm_rerun_probe_fraction` > 0, when a short probe of each fits the blurry photos
+//!    better from it ([`probe`]); trainings
 //!    from accurate poses (that second model, or ground truth) take
 //!    `init.accurate_poses_straight_fraction` as their `pose.straight_fraction`;
 //! 2. **training** (gems-train), with periodic atomic checkpoints and resume;

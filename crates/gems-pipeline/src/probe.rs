@@ -1,6 +1,7 @@
-//! Whether the model initialised on the first pass's renders replaces the first one, decided by
-//! how well each fits the blurry photos after a short training (`init.sfm_rerun_probe_fraction`,
-//! off by default).
+//! Whether the model initialised on the first pass's renders replaces the first one: decided
+//! by how far its cameras lie from the first pass's trained ones ([`renders_shift`],
+//! `init.sfm_rerun_min_shift_pct`), and, when asked, by how well each fits the blurry photos
+//! after a short training (`init.sfm_rerun_probe_fraction`, off by default).
 //!
 //! The renders' model helps when the blurry photos' tracks leave the first model distorted
 //! (extreme blur) and can hurt when the first model was already good (Deblur-NeRF's real
@@ -11,14 +12,21 @@
 //! from its probe, so only the other probe's steps are extra. Measured, the choice depends on
 //! where the probe stops — right on `blurball` and wrong on a generated extreme-blur scene at
 //! 200 steps, right on both at 400, wrong on `blurball` at 600 (BENCHMARKS.md, "A probe to
-//! choose the renders' model") — hence off by default.
+//! choose the renders' model") — hence off by default. The shift needs no training: the SfM on
+//! `blurball`'s renders, and on a lightly blurred generated scene's, recovers the cameras they
+//! were made at (0.15–0.25 % of the extent apart), and the first model trains better there;
+//! on extreme-blur generated scenes it finds cameras of its own, nearer the truth (1.5–5.7 %).
+//! One generated scene lies between (0.43 %, the renders' model better), so the margin is
+//! narrow (BENCHMARKS.md, "Keeping the renders' model only when its cameras are its own").
 
 use std::path::{Path, PathBuf};
 
+use gems_data::colmap::SparseModel;
 use gems_gpu::Engine;
+use gems_math::{CameraDiscrepancy, Se3};
 use gems_train::{
-    CHECKPOINT_JSON, CHECKPOINT_TENSORS, InitMode, TrainConfig, Trainer, prepare_input,
-    save_checkpoint,
+    CHECKPOINT_JSON, CHECKPOINT_TENSORS, InitMode, TrainConfig, TrainOutput, Trainer,
+    prepare_input, save_checkpoint,
 };
 use serde::{Deserialize, Serialize};
 
@@ -42,6 +50,13 @@ pub struct RerunChoice {
     /// probe ran.
     pub loss_first_model: Option<f64>,
     pub loss_renders_model: Option<f64>,
+    /// How far the renders' model's cameras lie from the first pass's trained ones
+    /// ([`renders_shift`]): centres in % of their extent and rotations in degrees; `None` when
+    /// not measured (no renders' model, or a choice written by an older version).
+    #[serde(default)]
+    pub shift_centre_pct: Option<f64>,
+    #[serde(default)]
+    pub shift_rotation_deg: Option<f64>,
 }
 
 impl RerunChoice {
@@ -83,6 +98,8 @@ impl RerunChoice {
             probe_steps,
             loss_first_model: Some(first),
             loss_renders_model: Some(renders),
+            shift_centre_pct: None,
+            shift_rotation_deg: None,
         }
     }
 
@@ -94,8 +111,42 @@ impl RerunChoice {
             probe_steps: 0,
             loss_first_model: None,
             loss_renders_model: None,
+            shift_centre_pct: None,
+            shift_rotation_deg: None,
         }
     }
+
+    /// The choice with the measured [`renders_shift`] recorded.
+    pub fn with_shift(self, shift: Option<CameraDiscrepancy>) -> Self {
+        Self {
+            shift_centre_pct: shift.map(|d| d.centre_pct),
+            shift_rotation_deg: shift.map(|d| d.rotation_deg),
+            ..self
+        }
+    }
+}
+
+/// How far the cameras of `renders_model` (the model initialised on the first pass's renders)
+/// lie from the first pass's trained mid-exposure cameras, the poses the renders were made at,
+/// over the views both hold ([`gems_math::camera_discrepancy`]); `None` when fewer than two
+/// views fix the similarity.
+///
+/// Why: an SfM on renders of a scene consistent with its cameras recovers those cameras, and
+/// then adds nothing the first pass had not; on renders of a scene distorted together with its
+/// cameras (extreme blur) it recovers cameras of its own.
+pub fn renders_shift(
+    first: &TrainOutput,
+    renders_model: &SparseModel,
+) -> Option<CameraDiscrepancy> {
+    let pairs: Vec<(Se3, Se3)> = first
+        .views
+        .iter()
+        .filter_map(|v| {
+            let img = renders_model.image_by_name(&v.name)?;
+            Some((Se3::from(&img.pose()).inverse(), Se3::from(&v.mid_c2w)))
+        })
+        .collect();
+    gems_math::camera_discrepancy(&pairs)
 }
 
 /// A probe's score: the mean of its step losses over the second half of its steps (the first

@@ -16,7 +16,7 @@ use crate::init::{
     Init, InitRequest, init_images, place_missing_views, rerun_init_on_renders, reruns_on_renders,
     resolve_init,
 };
-use crate::probe::{RerunChoice, continue_from, probe, remove_probe};
+use crate::probe::{RerunChoice, continue_from, probe, remove_probe, renders_shift};
 
 /// The file a training pass on a [profiled](gems_gpu::Engine::profiled) engine writes into its
 /// output folder: where its steps' time went, per kernel ([`gems_train::GpuProfile::report`]).
@@ -186,10 +186,32 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                 cfg.init.exif_focal_prior,
             );
             let rendered: Vec<String> = first.views.iter().map(|v| v.name.clone()).collect();
-            let choice = if !accept_rerun(second, &mode, &rerun, &rendered)? {
+            let accepted = accept_rerun(second, &mode, &rerun, &rendered)?;
+            let shift = if accepted {
+                renders_shift(&first, &gems_data::colmap::read_model(&renders_model)?)
+            } else {
+                None
+            };
+            let min_shift = cfg.init.sfm_rerun_min_shift_pct;
+            let shift_words = shift.map_or_else(
+                || "its shift from the first pass's cameras is undetermined".to_owned(),
+                |d| {
+                    format!(
+                        "its cameras lie {:.2} % of their extent and {:.2}° from the first \
+                         pass's trained cameras (init.sfm_rerun_min_shift_pct = {min_shift})",
+                        d.centre_pct, d.rotation_deg
+                    )
+                },
+            );
+            let choice = if !accepted {
                 RerunChoice::without_probes(
                     false,
                     "the initialiser failed on the renders or left a trained view out".into(),
+                )
+            } else if shift.is_some_and(|d| d.centre_pct < min_shift) {
+                RerunChoice::without_probes(
+                    false,
+                    format!("{shift_words}: it repeats them and brings no evidence beyond them"),
                 )
             } else if let Some(probe_steps) = cfg.sfm_rerun_probe_steps(rest) {
                 // Each candidate trains as its run proper would, and the kept one's run proper
@@ -221,9 +243,13 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             } else {
                 RerunChoice::without_probes(
                     true,
-                    "it registered every trained view (init.sfm_rerun_probe_fraction = 0)".into(),
+                    format!(
+                        "it registered every trained view and {shift_words} \
+                         (init.sfm_rerun_probe_fraction = 0)"
+                    ),
                 )
-            };
+            }
+            .with_shift(shift);
             // Written (with its folder) also when the initialiser failed before making one.
             choice.write(&rerun)?;
             if choice.kept {

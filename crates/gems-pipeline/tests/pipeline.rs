@@ -132,6 +132,9 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
         req.resume = resume;
         req.cfg.init.sfm_rerun_fraction = 0.5;
         req.cfg.init.sfm_rerun_min_steps = 1;
+        // Kept however close its cameras lie to the first pass's (see
+        // `sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own`).
+        req.cfg.init.sfm_rerun_min_shift_pct = 0.0;
         req.evaluate = false;
         // Every view trains, so every image the SfM saw is a render the second time.
         req.open.hold = Some(0);
@@ -190,6 +193,15 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
         "{}",
         trained.init_label
     );
+    let choice = gems_pipeline::probe::RerunChoice::read(&out.join("sfm_rerun"))
+        .unwrap()
+        .expect("the choice is written");
+    assert!(choice.kept, "{}", choice.reason);
+    assert!(
+        choice.shift_centre_pct.is_some_and(f64::is_finite)
+            && choice.shift_rotation_deg.is_some_and(f64::is_finite),
+        "the shift is recorded: {choice:?}"
+    );
 
     // Same seed, same result.
     let cloud = std::fs::read(&first.point_cloud).unwrap();
@@ -213,6 +225,101 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     std::fs::remove_dir_all(out.join("sfm_rerun")).unwrap();
     let resumed = run_with(&out, true);
     assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
+}
+
+#[test]
+fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene");
+    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    let out = dir.path().join("run");
+    let mut req = request(&scene, &out, InitRequest::new(Init::Sfm));
+    req.cfg.init.sfm_rerun_fraction = 0.5;
+    req.cfg.init.sfm_rerun_min_steps = 1;
+    // No SfM on renders lands this far from the cameras they were made at.
+    req.cfg.init.sfm_rerun_min_shift_pct = 1e9;
+    req.evaluate = false;
+    req.open.hold = Some(0);
+    train_scene(req).unwrap();
+
+    let choice = gems_pipeline::probe::RerunChoice::read(&out.join("sfm_rerun"))
+        .unwrap()
+        .expect("the choice is written");
+    assert!(!choice.kept);
+    assert!(
+        choice.reason.contains("init.sfm_rerun_min_shift_pct"),
+        "{}",
+        choice.reason
+    );
+    // The run proper trained from the first model with all the steps and its own paths.
+    let cfg = TrainConfig::from_toml_file(&out.join("config.toml")).unwrap();
+    assert_eq!((cfg.steps, cfg.pose.straight_fraction), (20, 0.0));
+    let trained = gems_train::TrainOutput::load(&out).unwrap();
+    assert!(!trained.init_label.contains("sfm_rerun"));
+    assert!(trained.run.unwrap().init.contains("tried and not kept"));
+
+    // The recorded shift is the renders' model against the first pass's trained cameras.
+    let first = gems_train::TrainOutput::load(&out.join("first_pass")).unwrap();
+    let renders =
+        gems_data::colmap::read_model(&out.join("sfm_rerun").join("sparse").join("0")).unwrap();
+    let shift = gems_pipeline::probe::renders_shift(&first, &renders).unwrap();
+    assert_eq!(choice.shift_centre_pct, Some(shift.centre_pct));
+    assert_eq!(choice.shift_rotation_deg, Some(shift.rotation_deg));
+    // A model holding exactly the trained cameras, in a frame of its own (turned, scaled,
+    // moved), does not shift; one with a camera moved along the path's extent does.
+    let frame = gems_math::Sim3 {
+        scale: 3.0,
+        rot: *gems_math::So3::exp(&gems_math::Vector3::new(0.2, -0.7, 0.4)).matrix(),
+        trans: gems_math::Vector3::new(4.0, -1.0, 2.0),
+    };
+    let mut same = renders.clone();
+    same.images = first
+        .views
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let c2w = frame.act_c2w(&gems_math::Se3::from(&v.mid_c2w));
+            gems_data::colmap::Image::from_pose(
+                i as u32 + 1,
+                renders.images[0].camera_id,
+                &v.name,
+                &gems_math::Pose::from(&c2w.inverse()),
+            )
+        })
+        .collect();
+    let none = gems_pipeline::probe::renders_shift(&first, &same).unwrap();
+    assert!(
+        none.centre_pct < 1e-6 && none.rotation_deg < 1e-6,
+        "{none:?}"
+    );
+    let c2w = |img: &gems_data::colmap::Image| gems_math::Se3::from(&img.pose()).inverse();
+    let extent = same
+        .images
+        .iter()
+        .flat_map(|a| {
+            same.images
+                .iter()
+                .map(move |b| (c2w(a).trans - c2w(b).trans).norm())
+        })
+        .fold(0.0, f64::max);
+    let mut moved = same.clone();
+    let c = c2w(&moved.images[1]);
+    let shifted = gems_math::Se3::new(
+        c.rot,
+        c.trans + gems_math::Vector3::new(0.05 * extent, 0.0, 0.0),
+    );
+    moved.images[1] = gems_data::colmap::Image::from_pose(
+        moved.images[1].id,
+        moved.images[1].camera_id,
+        &moved.images[1].name.clone(),
+        &gems_math::Pose::from(&shifted.inverse()),
+    );
+    let some = gems_pipeline::probe::renders_shift(&first, &moved).unwrap();
+    let n = first.views.len() as f64;
+    assert!(
+        some.centre_pct > 5.0 / n.sqrt() * 0.8 && some.centre_pct < 5.0,
+        "one of {n} cameras moved by 5 % of the extent: {some:?}"
+    );
 }
 
 #[test]
@@ -266,6 +373,8 @@ fn sfm_rerun_keeps_the_renders_model_only_as_its_probe_says() {
         req.cfg.init.sfm_rerun_fraction = 0.5;
         req.cfg.init.sfm_rerun_min_steps = 1;
         req.cfg.init.sfm_rerun_probe_fraction = 0.4;
+        // The probes choose, whatever the shift of the renders' cameras.
+        req.cfg.init.sfm_rerun_min_shift_pct = 0.0;
         req.evaluate = false;
         req.open.hold = Some(0);
         train_scene(req).unwrap()
