@@ -25,6 +25,21 @@ fn request(scene: &std::path::Path, output: &std::path::Path, init: InitRequest)
     }
 }
 
+/// A request whose first half is a first pass, with the SfM run again on its renders: every
+/// view trains (so every image the SfM saw is a render the second time), no evaluation.
+fn first_pass_request(
+    scene: &std::path::Path,
+    output: &std::path::Path,
+    init: InitRequest,
+) -> TrainRequest {
+    let mut req = request(scene, output, init);
+    req.cfg.init.sfm_rerun_fraction = 0.5;
+    req.cfg.init.sfm_rerun_min_steps = 1;
+    req.evaluate = false;
+    req.open.hold = Some(0);
+    req
+}
+
 #[test]
 fn tiny_scene_end_to_end_from_rust() {
     let dir = tempfile::tempdir().unwrap();
@@ -128,16 +143,11 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     let scene = dir.path().join("scene");
     gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
     let run_with = |out: &std::path::Path, resume: bool| {
-        let mut req = request(&scene, out, InitRequest::new(Init::Sfm));
+        let mut req = first_pass_request(&scene, out, InitRequest::new(Init::Sfm));
         req.resume = resume;
-        req.cfg.init.sfm_rerun_fraction = 0.5;
-        req.cfg.init.sfm_rerun_min_steps = 1;
         // Kept however close its cameras lie to the first pass's (see
         // `sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own`).
         req.cfg.init.sfm_rerun_min_shift_pct = 0.0;
-        req.evaluate = false;
-        // Every view trains, so every image the SfM saw is a render the second time.
-        req.open.hold = Some(0);
         train_scene(req).unwrap()
     };
     let run = |out: &std::path::Path| run_with(out, false);
@@ -233,13 +243,9 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
     let scene = dir.path().join("scene");
     gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
     let out = dir.path().join("run");
-    let mut req = request(&scene, &out, InitRequest::new(Init::Sfm));
-    req.cfg.init.sfm_rerun_fraction = 0.5;
-    req.cfg.init.sfm_rerun_min_steps = 1;
+    let mut req = first_pass_request(&scene, &out, InitRequest::new(Init::Sfm));
     // No SfM on renders lands this far from the cameras they were made at.
     req.cfg.init.sfm_rerun_min_shift_pct = 1e9;
-    req.evaluate = false;
-    req.open.hold = Some(0);
     train_scene(req).unwrap();
 
     let choice = gems_pipeline::probe::RerunChoice::read(&out.join("sfm_rerun"))
@@ -368,15 +374,11 @@ fn sfm_rerun_keeps_the_renders_model_only_as_its_probe_says() {
     gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
     let out = dir.path().join("run");
     let run = |resume: bool| {
-        let mut req = request(&scene, &out, InitRequest::new(Init::Sfm));
+        let mut req = first_pass_request(&scene, &out, InitRequest::new(Init::Sfm));
         req.resume = resume;
-        req.cfg.init.sfm_rerun_fraction = 0.5;
-        req.cfg.init.sfm_rerun_min_steps = 1;
         req.cfg.init.sfm_rerun_probe_fraction = 0.4;
         // The probes choose, whatever the shift of the renders' cameras.
         req.cfg.init.sfm_rerun_min_shift_pct = 0.0;
-        req.evaluate = false;
-        req.open.hold = Some(0);
         train_scene(req).unwrap()
     };
     let first = run(false);
@@ -447,13 +449,9 @@ fn a_learned_focal_starts_the_renders_sfm_and_a_given_focal_is_kept() {
     let scene = dir.path().join("scene");
     gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
     let run = |out: &std::path::Path, init: InitRequest| {
-        let mut req = request(&scene, out, init);
+        let mut req = first_pass_request(&scene, out, init);
         req.cfg.pose.focal_lr = 1e-2;
         req.cfg.init.exif_focal_prior = 0.0;
-        req.cfg.init.sfm_rerun_fraction = 0.5;
-        req.cfg.init.sfm_rerun_min_steps = 1;
-        req.evaluate = false;
-        req.open.hold = Some(0);
         train_scene(req).unwrap();
         (
             gems_train::TrainOutput::load(&out.join("first_pass")).unwrap(),
