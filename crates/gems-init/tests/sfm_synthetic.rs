@@ -174,12 +174,24 @@ fn busy_texture_scene_sharp_and_blurred() {
     assert_eq!(r.stats.registered, 12);
     let err = common::aligned_rmse_fraction(&poses, &s.gt);
     assert!(err < 0.01, "sharp: {err}");
+    assert!(r.stats.advice.is_empty(), "{:?}", r.stats.advice);
     let s = common::scene(12, 240, 180, 7, 0.12, 42);
     let r = run_sfm(&s.images, &SfmOptions::default()).expect("sfm");
     assert_eq!(
         r.stats.registered, 12,
         "unregistered: {:?}",
         r.stats.unregistered
+    );
+    // Its focal was estimated under that blur: the report says how little to trust it.
+    assert!(
+        r.stats.blur_px_estimate > gems_init::sfm::FOCAL_ADVICE_BLUR * 240.0,
+        "blur {}",
+        r.stats.blur_px_estimate
+    );
+    assert!(
+        r.stats.advice.iter().any(|a| a.contains("--focal")),
+        "{:?}",
+        r.stats.advice
     );
 }
 

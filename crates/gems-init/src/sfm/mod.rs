@@ -360,8 +360,9 @@ pub struct SfmStats {
     pub capture_order: bool,
     /// One entry per input photo, in input order: what the user can act on.
     pub views: Vec<ViewReport>,
-    /// Plain sentences on the photos that were dropped and what to try (empty when every photo
-    /// registered).
+    /// Plain sentences on what the user can act on: the photos that were dropped and what to
+    /// try, and an estimated focal that blur left barely determined ([`FOCAL_ADVICE_BLUR`];
+    /// empty when neither applies).
     pub advice: Vec<String>,
 }
 
@@ -416,6 +417,32 @@ fn explain_unregistered(stats: &mut SfmStats, textureless: &[String]) {
                 .into(),
         );
     }
+}
+
+/// Estimated blur, as a fraction of the photos' long side, above which an estimated focal is
+/// reported as barely determined. On generated scenes the estimated focal came out 2.0 % off on
+/// average at blur level 3 (about 2.5 % of the long side), 4.7 % at level 5 (5 %) and 20 % at
+/// level 7 (7.5 %); at 7.5 % and 15 % on other scenes a median 13 % and 26 % (up to 126 %). The
+/// tracks' optimum itself moves with the blur (crates/gems-init/BENCHMARKS.md, "The estimated
+/// focal refined after coarse to fine" and "Under heavy blur the observations' optimum is not
+/// the truth").
+pub const FOCAL_ADVICE_BLUR: f64 = 0.05;
+
+/// The advice sentence for a focal the SfM estimated (not given, not from EXIF) from photos
+/// blurred by more than [`FOCAL_ADVICE_BLUR`] of their `long` side.
+fn focal_advice(stats: &SfmStats, long: f64) -> Option<String> {
+    let fraction = stats.blur_px_estimate / long;
+    (!stats.focal_from_metadata && fraction > FOCAL_ADVICE_BLUR).then(|| {
+        format!(
+            "The focal length ({:.0} px) was estimated from photos blurred by about {:.0} px \
+             ({:.0} % of their long side), which barely determine it: at such blur the estimate \
+             is often 10-30 % off and sometimes more. Pass --focal if the camera's focal length \
+             in pixels is known.",
+            stats.focal,
+            stats.blur_px_estimate,
+            100.0 * fraction
+        )
+    })
 }
 
 /// The reconstruction: camera, views (in input order), points, diagnostics.
@@ -699,6 +726,9 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         v.blur_px = f64::from(*b);
     }
     explain_unregistered(&mut result.stats, textureless.as_deref().unwrap_or(&[]));
+    if let Some(line) = focal_advice(&result.stats, long) {
+        result.stats.advice.push(line);
+    }
     for line in &result.stats.advice {
         tracing::warn!("{line}");
     }
@@ -1391,6 +1421,47 @@ mod tests {
             error_px,
             focal_start_px: f,
         }
+    }
+
+    /// The report of a 240-px-wide capture whose focal was `given` or estimated, with `blur` px
+    /// of estimated blur.
+    fn stats_with(given: bool, blur: f64) -> SfmStats {
+        SfmStats {
+            registered: 4,
+            total: 4,
+            points: 100,
+            mean_reprojection_error: 0.5,
+            mean_track_length: 3.0,
+            seconds: 1.0,
+            unregistered: Vec::new(),
+            working_size: 128,
+            final_size: 128,
+            focal: 207.8,
+            focal_from_metadata: given,
+            seconds_features: 0.5,
+            seconds_reconstruction: 0.5,
+            blur_px_estimate: blur,
+            capture_order: false,
+            views: Vec::new(),
+            advice: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn an_estimated_focal_under_heavy_blur_comes_with_advice() {
+        let line = focal_advice(&stats_with(false, 18.0), 240.0).expect("7.5 % of the side");
+        assert!(
+            line.contains("208 px") && line.contains("18 px") && line.contains("8 %"),
+            "{line}"
+        );
+        assert!(line.contains("--focal"), "{line}");
+        assert_eq!(focal_advice(&stats_with(false, 12.0), 240.0), None, "5 %");
+        assert_eq!(focal_advice(&stats_with(false, 0.0), 240.0), None, "sharp");
+        assert_eq!(
+            focal_advice(&stats_with(true, 30.0), 240.0),
+            None,
+            "a focal given or read from EXIF"
+        );
     }
 
     #[test]
