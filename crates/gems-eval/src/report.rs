@@ -51,7 +51,8 @@ pub struct ReportInput {
 #[derive(Clone, Debug, Default, serde::Deserialize)]
 pub struct Registration {
     pub views: Vec<RegisteredPhoto>,
-    /// Plain sentences on dropped photos and what to try.
+    /// Plain sentences on dropped photos and what to try, and on a focal estimated under heavy
+    /// blur (`gems_init::sfm::SfmStats::advice`).
     #[serde(default)]
     pub advice: Vec<String>,
 }
