@@ -40,11 +40,17 @@ fn first_pass_request(
     req
 }
 
-#[test]
-fn tiny_scene_end_to_end_from_rust() {
+/// A temporary folder holding the generator's tiny scene in `scene/`.
+fn tiny_scene() -> (tempfile::TempDir, std::path::PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("scene");
     gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    (dir, scene)
+}
+
+#[test]
+fn tiny_scene_end_to_end_from_rust() {
+    let (dir, scene) = tiny_scene();
     let out = dir.path().join("run");
     let run = train_scene(request(&scene, &out, InitRequest::new(Init::Gt))).unwrap();
 
@@ -107,9 +113,7 @@ fn tiny_scene_end_to_end_from_rust() {
 
 #[test]
 fn events_with_an_initialiser_that_reads_no_images_is_an_error() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scene");
-    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    let (dir, scene) = tiny_scene();
     let init = InitRequest {
         events: Some(gems_pipeline::EventInit {
             threshold: 0.2,
@@ -139,9 +143,7 @@ fn a_missing_scene_is_one_error_naming_it() {
 
 #[test]
 fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scene");
-    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    let (dir, scene) = tiny_scene();
     let run_with = |out: &std::path::Path, resume: bool| {
         let mut req = first_pass_request(&scene, out, InitRequest::new(Init::Sfm));
         req.resume = resume;
@@ -239,9 +241,7 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
 
 #[test]
 fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scene");
-    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    let (dir, scene) = tiny_scene();
     let out = dir.path().join("run");
     let mut req = first_pass_request(&scene, &out, InitRequest::new(Init::Sfm));
     // No SfM on renders lands this far from the cameras they were made at.
@@ -369,9 +369,7 @@ fn the_probe_scores_exact_cameras_below_perturbed_ones() {
 
 #[test]
 fn sfm_rerun_keeps_the_renders_model_only_as_its_probe_says() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scene");
-    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    let (dir, scene) = tiny_scene();
     let out = dir.path().join("run");
     let run = |resume: bool| {
         let mut req = first_pass_request(&scene, &out, InitRequest::new(Init::Sfm));
@@ -445,9 +443,7 @@ fn sfm_rerun_keeps_the_renders_model_only_as_its_probe_says() {
 /// command line is kept.
 #[test]
 fn a_learned_focal_starts_the_renders_sfm_and_a_given_focal_is_kept() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scene");
-    gems_synth::generate(&gems_synth::SynthConfig::tiny(), &scene).unwrap();
+    let (dir, scene) = tiny_scene();
     let run = |out: &std::path::Path, init: InitRequest| {
         let mut req = first_pass_request(&scene, out, init);
         req.cfg.pose.focal_lr = 1e-2;
