@@ -12,7 +12,8 @@
 //!    first pass's trained ones ([`probe::renders_shift`]) — and, with
 //!    `init.sfm_rerun_probe_fraction` > 0, when a short probe of each fits the blurry photos
 //!    better from it ([`probe`]); trainings
-//!    from accurate poses (that second model, or ground truth) take
+//!    from accurate poses (that second model, the first one when the renders recovered its
+//!    cameras, or ground truth) take
 //!    `init.accurate_poses_straight_fraction` as their `pose.straight_fraction`;
 //! 2. **training** (gems-train), with periodic atomic checkpoints and resume;
 //! 3. **exports**: `point_cloud.ply` (input frame), `model.json`, `config.toml`;

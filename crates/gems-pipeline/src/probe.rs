@@ -57,6 +57,13 @@ pub struct RerunChoice {
     pub shift_centre_pct: Option<f64>,
     #[serde(default)]
     pub shift_rotation_deg: Option<f64>,
+    /// The renders' model was set aside because it repeats the first pass's cameras (a shift
+    /// below `init.sfm_rerun_min_shift_pct`): the first model's cameras were consistent with a
+    /// scene trained on the photos, so its run proper starts from accurate poses and has
+    /// straight paths first, as every training from accurate poses does. `false` in a choice
+    /// written by an older version (which trained those paths freely).
+    #[serde(default)]
+    pub first_model_confirmed: bool,
 }
 
 impl RerunChoice {
@@ -100,6 +107,7 @@ impl RerunChoice {
             loss_renders_model: Some(renders),
             shift_centre_pct: None,
             shift_rotation_deg: None,
+            first_model_confirmed: false,
         }
     }
 
@@ -113,6 +121,7 @@ impl RerunChoice {
             loss_renders_model: None,
             shift_centre_pct: None,
             shift_rotation_deg: None,
+            first_model_confirmed: false,
         }
     }
 

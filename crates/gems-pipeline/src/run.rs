@@ -209,10 +209,15 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                     "the initialiser failed on the renders or left a trained view out".into(),
                 )
             } else if shift.is_some_and(|d| d.centre_pct < min_shift) {
-                RerunChoice::without_probes(
-                    false,
-                    format!("{shift_words}: it repeats them and brings no evidence beyond them"),
-                )
+                RerunChoice {
+                    first_model_confirmed: true,
+                    ..RerunChoice::without_probes(
+                        false,
+                        format!(
+                            "{shift_words}: it repeats them and brings no evidence beyond them"
+                        ),
+                    )
+                }
             } else if let Some(probe_steps) = cfg.sfm_rerun_probe_steps(rest) {
                 // Each candidate trains as its run proper would, and the kept one's run proper
                 // continues from its probe.
@@ -231,7 +236,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                 ];
                 let mut losses = [0.0; 2];
                 for ((renders, candidate, dir), loss) in candidates.iter().zip(&mut losses) {
-                    let cfg = run_proper_config(&cfg, *renders, rest);
+                    let cfg = run_proper_config(&cfg, *renders, *renders, rest);
                     (*loss, engine) = probe(&scene, candidate, &cfg, probe_steps, engine, dir)?;
                 }
                 let choice = RerunChoice::from_probes(probe_steps, losses[0], losses[1]);
@@ -278,7 +283,12 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         if keep_rerun {
             mode = InitMode::Colmap(Some(rerun.join("sparse").join("0")));
         }
-        cfg = run_proper_config(&cfg, keep_rerun, rest);
+        cfg = run_proper_config(
+            &cfg,
+            keep_rerun,
+            keep_rerun || choice.first_model_confirmed,
+            rest,
+        );
     }
     train_and_report(TrainJob {
         scene: &req.scene,
@@ -311,13 +321,21 @@ fn focal_is_known(init: &InitRequest) -> Option<&'static str> {
 }
 
 /// The configuration of the run proper after a first pass, from the run's `cfg`: from the
-/// renders' model it has the `rest` of the steps and, its initial poses now accurate, straight
-/// paths first (`init.accurate_poses_straight_fraction`); from the first model it has all the
-/// steps and `cfg`'s own paths. Either is one pass.
-fn run_proper_config(cfg: &TrainConfig, renders_model: bool, rest: usize) -> TrainConfig {
+/// renders' model it has the `rest` of the steps, from the first model all of them; where its
+/// initial poses are accurate (the renders' model's, or the first model's when the renders
+/// repeated its cameras, [`RerunChoice::first_model_confirmed`]) it has straight paths first
+/// (`init.accurate_poses_straight_fraction`), otherwise `cfg`'s own paths. Either is one pass.
+fn run_proper_config(
+    cfg: &TrainConfig,
+    renders_model: bool,
+    accurate_poses: bool,
+    rest: usize,
+) -> TrainConfig {
     let mut run = cfg.clone();
     if renders_model {
         run.steps = rest;
+    }
+    if accurate_poses {
         run.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
     }
     run.init.sfm_rerun_fraction = 0.0;
@@ -781,6 +799,33 @@ mod tests {
         assert!(
             accept_rerun(other, &first, &rerun, &trained).is_err(),
             "errors other than the initialiser's own stop the run"
+        );
+    }
+
+    #[test]
+    fn the_run_proper_has_straight_paths_first_only_from_accurate_poses() {
+        let mut cfg = TrainConfig {
+            steps: 300,
+            ..TrainConfig::default()
+        };
+        cfg.pose.straight_fraction = 0.05;
+        cfg.init.accurate_poses_straight_fraction = 0.2;
+        let paths =
+            |c: &TrainConfig| (c.steps, c.pose.straight_fraction, c.init.sfm_rerun_fraction);
+        // The renders' model: the rest of the steps, accurate poses.
+        assert_eq!(
+            paths(&run_proper_config(&cfg, true, true, 200)),
+            (200, 0.2, 0.0)
+        );
+        // The first model confirmed by its renders: all the steps, accurate poses.
+        assert_eq!(
+            paths(&run_proper_config(&cfg, false, true, 200)),
+            (300, 0.2, 0.0)
+        );
+        // The first model because the renders' failed: all the steps, the run's own paths.
+        assert_eq!(
+            paths(&run_proper_config(&cfg, false, false, 200)),
+            (300, 0.05, 0.0)
         );
     }
 }

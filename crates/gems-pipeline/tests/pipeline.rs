@@ -251,15 +251,26 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
     let choice = gems_pipeline::probe::RerunChoice::read(&out.join("sfm_rerun"))
         .unwrap()
         .expect("the choice is written");
-    assert!(!choice.kept);
+    assert!(!choice.kept && choice.first_model_confirmed);
     assert!(
         choice.reason.contains("init.sfm_rerun_min_shift_pct"),
         "{}",
         choice.reason
     );
-    // The run proper trained from the first model with all the steps and its own paths.
+    // The run proper trained from the first model with all the steps and, its cameras
+    // confirmed by the renders, straight paths first (the first pass had its own paths).
     let cfg = TrainConfig::from_toml_file(&out.join("config.toml")).unwrap();
-    assert_eq!((cfg.steps, cfg.pose.straight_fraction), (20, 0.0));
+    let first_cfg =
+        TrainConfig::from_toml_file(&out.join("first_pass").join("config.toml")).unwrap();
+    assert!(cfg.init.accurate_poses_straight_fraction > 0.0);
+    assert_eq!(
+        (
+            cfg.steps,
+            cfg.pose.straight_fraction,
+            first_cfg.pose.straight_fraction
+        ),
+        (20, cfg.init.accurate_poses_straight_fraction, 0.0)
+    );
     let trained = gems_train::TrainOutput::load(&out).unwrap();
     assert!(!trained.init_label.contains("sfm_rerun"));
     assert!(trained.run.unwrap().init.contains("tried and not kept"));

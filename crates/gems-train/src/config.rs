@@ -113,7 +113,8 @@ pub struct PoseConfig {
     /// far from the truth (APE 0.090 against 0.046), while from ground-truth poses it gained +2.3 dB refined deblurring and
     /// +2.2 dB novel views there (BENCHMARKS.md, "Straight paths first"). Set 0.15 when the
     /// initial poses are accurate (a calibrated rig, COLMAP on sharp frames). Trainings from
-    /// ground-truth poses and from a model made on a first pass's renders use
+    /// ground-truth poses, from a model made on a first pass's renders, and from the first
+    /// model when those renders confirmed its cameras use
     /// `init.accurate_poses_straight_fraction` instead.
     pub straight_fraction: f64,
     /// Weight of the anchor energy ‖mean_k Log Δ(u_k)‖² ([`gems_math::anchor_energy`]), added
@@ -262,8 +263,13 @@ pub struct InitConfig {
     pub sfm_rerun_min_shift_pct: f64,
     /// `pose.straight_fraction` of a training whose initial poses are accurate: from ground-truth
     /// poses (`--init gt`), and the run proper after `sfm_rerun_fraction`, from the model made on
-    /// the first pass's renders. Every other training (from the blurry photos' SfM, an imported
-    /// COLMAP model, perturbed ground truth, and the first pass) uses `pose.straight_fraction`.
+    /// the first pass's renders or, when the SfM on those renders recovered the first pass's
+    /// cameras (a shift below `sfm_rerun_min_shift_pct`), from the first model (at 8 px of blur
+    /// +1.0 dB at the midpoint and +0.4 dB refined, at 4 px −0.2 / ±0.0 dB, on blurball's
+    /// held-out views +1.0 dB at the dataset's poses and +0.1 dB refined; BENCHMARKS.md,
+    /// "Straight paths first from a first model its renders confirmed"). Every other training
+    /// (from the blurry photos' SfM, an imported COLMAP model, perturbed ground truth, and the
+    /// first pass) uses `pose.straight_fraction`.
     /// Straight paths first help when the initial poses are accurate and hurt from the blurry
     /// photos' SfM (see `pose.straight_fraction`). From ground-truth poses 0.15 gained +0.85 dB
     /// refined deblurring, +0.9 dB refined novel views and +2.4 dB at the trajectory midpoint
