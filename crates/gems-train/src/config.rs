@@ -266,7 +266,8 @@ pub struct InitConfig {
     /// the first pass's renders or, when the SfM on those renders recovered the first pass's
     /// cameras (a shift below `sfm_rerun_min_shift_pct`), from the first model (at 8 px of blur
     /// +1.0 dB at the midpoint and +0.4 dB refined, at 4 px −0.2 / ±0.0 dB, on blurball's
-    /// held-out views +1.0 dB at the dataset's poses and +0.1 dB refined; BENCHMARKS.md,
+    /// held-out views +1.0 dB at the dataset's poses and +0.1 dB refined; on a 4 px scene made
+    /// afterwards +1.2 / +0.4 dB but −0.45 dB of refined novel views; BENCHMARKS.md,
     /// "Straight paths first from a first model its renders confirmed"). Every other training
     /// (from the blurry photos' SfM, an imported COLMAP model, perturbed ground truth, and the
     /// first pass) uses `pose.straight_fraction`.
