@@ -7,13 +7,14 @@
 //!    deblurring the images by EDI for either initialiser ([`edi_images`], GeMS-E), or ground
 //!    truth (optionally perturbed); with `init.sfm_rerun_fraction` > 0, a first training from
 //!    that model whose sharp renders the image initialiser reconstructs again
-//!    ([`rerun_init_on_renders`]), the run proper starting from the second model when its
-//!    cameras are its own — at least `init.sfm_rerun_min_shift_pct` of their extent from the
-//!    first pass's trained ones ([`probe::renders_shift`]) — and, with
+//!    ([`rerun_init_on_renders`]), the run proper starting from the second model unless it
+//!    confirms the first one — its cameras within `init.sfm_rerun_confirm_pct` of their extent
+//!    of the first model's ([`probe::renders_change`], [`probe::confirms_first_model`]) — and,
+//!    with
 //!    `init.sfm_rerun_probe_fraction` > 0, when a short probe of each fits the blurry photos
 //!    better from it ([`probe`]); trainings
-//!    from accurate poses (that second model, the first one when the renders recovered its
-//!    cameras, or ground truth) take
+//!    from accurate poses (that second model, the first one when the renders' model confirmed
+//!    it, or ground truth) take
 //!    `init.accurate_poses_straight_fraction` as their `pose.straight_fraction`;
 //! 2. **training** (gems-train), with periodic atomic checkpoints and resume;
 //! 3. **exports**: `point_cloud.ply` (input frame), `model.json`, `config.toml`;

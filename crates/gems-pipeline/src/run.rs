@@ -16,7 +16,10 @@ use crate::init::{
     Init, InitRequest, init_images, place_missing_views, rerun_init_on_renders, reruns_on_renders,
     resolve_init,
 };
-use crate::probe::{RerunChoice, continue_from, probe, remove_probe, renders_shift};
+use crate::probe::{
+    RerunChoice, confirms_first_model, continue_from, probe, remove_probe, renders_change,
+    renders_shift,
+};
 
 /// The file a training pass on a [profiled](gems_gpu::Engine::profiled) engine writes into its
 /// output folder: where its steps' time went, per kernel ([`gems_train::GpuProfile::report`]).
@@ -187,34 +190,49 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             );
             let rendered: Vec<String> = first.views.iter().map(|v| v.name.clone()).collect();
             let accepted = accept_rerun(second, &mode, &rerun, &rendered)?;
-            let shift = if accepted {
-                renders_shift(&first, &gems_data::colmap::read_model(&renders_model)?)
+            let (change, shift) = if accepted {
+                let renders = gems_data::colmap::read_model(&renders_model)?;
+                (
+                    renders_change(&first, &renders),
+                    renders_shift(&first, &renders),
+                )
             } else {
-                None
+                (None, None)
             };
-            let min_shift = cfg.init.sfm_rerun_min_shift_pct;
-            let shift_words = shift.map_or_else(
-                || "its shift from the first pass's cameras is undetermined".to_owned(),
-                |d| {
-                    format!(
-                        "its cameras lie {:.2} % of their extent and {:.2}° from the first \
-                         pass's trained cameras (init.sfm_rerun_min_shift_pct = {min_shift})",
-                        d.centre_pct, d.rotation_deg
-                    )
-                },
+            let (confirm, min_shift) = (
+                cfg.init.sfm_rerun_confirm_pct,
+                cfg.init.sfm_rerun_min_shift_pct,
+            );
+            let measure = |d: Option<gems_math::CameraDiscrepancy>| {
+                d.map_or_else(
+                    || "undetermined".to_owned(),
+                    |d| {
+                        format!(
+                            "{:.2} % of the extent, {:.2}°",
+                            d.centre_pct, d.rotation_deg
+                        )
+                    },
+                )
+            };
+            let words = format!(
+                "its cameras lie {} from the first model's (init.sfm_rerun_confirm_pct = \
+                 {confirm}) and {} from the first pass's trained ones \
+                 (init.sfm_rerun_min_shift_pct = {min_shift})",
+                measure(change),
+                measure(shift)
             );
             let choice = if !accepted {
                 RerunChoice::without_probes(
                     false,
                     "the initialiser failed on the renders or left a trained view out".into(),
                 )
-            } else if shift.is_some_and(|d| d.centre_pct < min_shift) {
+            } else if confirms_first_model(change, shift, confirm, min_shift) {
                 RerunChoice {
                     first_model_confirmed: true,
                     ..RerunChoice::without_probes(
                         false,
                         format!(
-                            "{shift_words}: it repeats them and brings no evidence beyond them"
+                            "{words}: it confirms the first model and brings nothing beyond it"
                         ),
                     )
                 }
@@ -249,12 +267,12 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                 RerunChoice::without_probes(
                     true,
                     format!(
-                        "it registered every trained view and {shift_words} \
+                        "it registered every trained view and {words} \
                          (init.sfm_rerun_probe_fraction = 0)"
                     ),
                 )
             }
-            .with_shift(shift);
+            .with_measures(shift, change);
             // Written (with its folder) also when the initialiser failed before making one.
             choice.write(&rerun)?;
             if choice.kept {
@@ -322,8 +340,8 @@ fn focal_is_known(init: &InitRequest) -> Option<&'static str> {
 
 /// The configuration of the run proper after a first pass, from the run's `cfg`: from the
 /// renders' model it has the `rest` of the steps, from the first model all of them; where its
-/// initial poses are accurate (the renders' model's, or the first model's when the renders
-/// repeated its cameras, [`RerunChoice::first_model_confirmed`]) it has straight paths first
+/// initial poses are accurate (the renders' model's, or the first model's when the renders'
+/// model confirmed it, [`RerunChoice::first_model_confirmed`]) it has straight paths first
 /// (`init.accurate_poses_straight_fraction`), otherwise `cfg`'s own paths. Either is one pass.
 fn run_proper_config(
     cfg: &TrainConfig,

@@ -147,9 +147,9 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     let run_with = |out: &std::path::Path, resume: bool| {
         let mut req = first_pass_request(&scene, out, InitRequest::new(Init::Sfm));
         req.resume = resume;
-        // Kept however close its cameras lie to the first pass's (see
+        // Kept however close its cameras lie to the first model's (see
         // `sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own`).
-        req.cfg.init.sfm_rerun_min_shift_pct = 0.0;
+        req.cfg.init.sfm_rerun_confirm_pct = 0.0;
         train_scene(req).unwrap()
     };
     let run = |out: &std::path::Path| run_with(out, false);
@@ -211,8 +211,10 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     assert!(choice.kept, "{}", choice.reason);
     assert!(
         choice.shift_centre_pct.is_some_and(f64::is_finite)
-            && choice.shift_rotation_deg.is_some_and(f64::is_finite),
-        "the shift is recorded: {choice:?}"
+            && choice.shift_rotation_deg.is_some_and(f64::is_finite)
+            && choice.change_centre_pct.is_some_and(f64::is_finite)
+            && choice.change_rotation_deg.is_some_and(f64::is_finite),
+        "the shift and the change are recorded: {choice:?}"
     );
 
     // Same seed, same result.
@@ -244,8 +246,8 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
     let (dir, scene) = tiny_scene();
     let out = dir.path().join("run");
     let mut req = first_pass_request(&scene, &out, InitRequest::new(Init::Sfm));
-    // No SfM on renders lands this far from the cameras they were made at.
-    req.cfg.init.sfm_rerun_min_shift_pct = 1e9;
+    // No SfM on renders lands this far from the first model's cameras.
+    req.cfg.init.sfm_rerun_confirm_pct = 1e9;
     train_scene(req).unwrap();
 
     let choice = gems_pipeline::probe::RerunChoice::read(&out.join("sfm_rerun"))
@@ -253,7 +255,8 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
         .expect("the choice is written");
     assert!(!choice.kept && choice.first_model_confirmed);
     assert!(
-        choice.reason.contains("init.sfm_rerun_min_shift_pct"),
+        choice.reason.contains("init.sfm_rerun_confirm_pct")
+            && choice.reason.contains("confirms the first model"),
         "{}",
         choice.reason
     );
@@ -275,68 +278,96 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
     assert!(!trained.init_label.contains("sfm_rerun"));
     assert!(trained.run.unwrap().init.contains("tried and not kept"));
 
-    // The recorded shift is the renders' model against the first pass's trained cameras.
+    // The recorded change is the renders' model against the first model's cameras (the first
+    // pass's initial ones), the shift against the first pass's trained cameras.
     let first = gems_train::TrainOutput::load(&out.join("first_pass")).unwrap();
     let renders =
         gems_data::colmap::read_model(&out.join("sfm_rerun").join("sparse").join("0")).unwrap();
+    let change = gems_pipeline::probe::renders_change(&first, &renders).unwrap();
     let shift = gems_pipeline::probe::renders_shift(&first, &renders).unwrap();
+    assert_eq!(choice.change_centre_pct, Some(change.centre_pct));
+    assert_eq!(choice.change_rotation_deg, Some(change.rotation_deg));
     assert_eq!(choice.shift_centre_pct, Some(shift.centre_pct));
     assert_eq!(choice.shift_rotation_deg, Some(shift.rotation_deg));
-    // A model holding exactly the trained cameras, in a frame of its own (turned, scaled,
-    // moved), does not shift; one with a camera moved along the path's extent does.
+    assert_ne!(
+        change, shift,
+        "the first pass moved its cameras, so the two differ"
+    );
+    // A model holding exactly the cameras measured against, in a frame of its own (turned,
+    // scaled, moved), lies at nothing from them; one with a camera moved along the path's
+    // extent lies at the expected distance.
     let frame = gems_math::Sim3 {
         scale: 3.0,
         rot: *gems_math::So3::exp(&gems_math::Vector3::new(0.2, -0.7, 0.4)).matrix(),
         trans: gems_math::Vector3::new(4.0, -1.0, 2.0),
     };
-    let mut same = renders.clone();
-    same.images = first
-        .views
-        .iter()
-        .enumerate()
-        .map(|(i, v)| {
-            let c2w = frame.act_c2w(&gems_math::Se3::from(&v.mid_c2w));
-            gems_data::colmap::Image::from_pose(
-                i as u32 + 1,
-                renders.images[0].camera_id,
-                &v.name,
-                &gems_math::Pose::from(&c2w.inverse()),
-            )
-        })
-        .collect();
-    let none = gems_pipeline::probe::renders_shift(&first, &same).unwrap();
-    assert!(
-        none.centre_pct < 1e-6 && none.rotation_deg < 1e-6,
-        "{none:?}"
-    );
+    type Camera = fn(&gems_train::ViewResult) -> &gems_math::Pose;
+    let holding = |camera: Camera| {
+        let mut model = renders.clone();
+        model.images = first
+            .views
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let c2w = frame.act_c2w(&gems_math::Se3::from(camera(v)));
+                gems_data::colmap::Image::from_pose(
+                    i as u32 + 1,
+                    renders.images[0].camera_id,
+                    &v.name,
+                    &gems_math::Pose::from(&c2w.inverse()),
+                )
+            })
+            .collect();
+        model
+    };
     let c2w = |img: &gems_data::colmap::Image| gems_math::Se3::from(&img.pose()).inverse();
-    let extent = same
-        .images
-        .iter()
-        .flat_map(|a| {
-            same.images
-                .iter()
-                .map(move |b| (c2w(a).trans - c2w(b).trans).norm())
-        })
-        .fold(0.0, f64::max);
-    let mut moved = same.clone();
-    let c = c2w(&moved.images[1]);
-    let shifted = gems_math::Se3::new(
-        c.rot,
-        c.trans + gems_math::Vector3::new(0.05 * extent, 0.0, 0.0),
-    );
-    moved.images[1] = gems_data::colmap::Image::from_pose(
-        moved.images[1].id,
-        moved.images[1].camera_id,
-        &moved.images[1].name.clone(),
-        &gems_math::Pose::from(&shifted.inverse()),
-    );
-    let some = gems_pipeline::probe::renders_shift(&first, &moved).unwrap();
+    let moved = |model: &gems_data::colmap::SparseModel| {
+        let extent = model
+            .images
+            .iter()
+            .flat_map(|a| {
+                model
+                    .images
+                    .iter()
+                    .map(move |b| (c2w(a).trans - c2w(b).trans).norm())
+            })
+            .fold(0.0, f64::max);
+        let mut moved = model.clone();
+        let c = c2w(&moved.images[1]);
+        let shifted = gems_math::Se3::new(
+            c.rot,
+            c.trans + gems_math::Vector3::new(0.05 * extent, 0.0, 0.0),
+        );
+        moved.images[1] = gems_data::colmap::Image::from_pose(
+            moved.images[1].id,
+            moved.images[1].camera_id,
+            &moved.images[1].name.clone(),
+            &gems_math::Pose::from(&shifted.inverse()),
+        );
+        moved
+    };
     let n = first.views.len() as f64;
-    assert!(
-        some.centre_pct > 5.0 / n.sqrt() * 0.8 && some.centre_pct < 5.0,
-        "one of {n} cameras moved by 5 % of the extent: {some:?}"
-    );
+    type Measure = fn(
+        &gems_train::TrainOutput,
+        &gems_data::colmap::SparseModel,
+    ) -> Option<gems_math::CameraDiscrepancy>;
+    let measures: [(Measure, Camera); 2] = [
+        (gems_pipeline::probe::renders_change, |v| &v.c2w_init),
+        (gems_pipeline::probe::renders_shift, |v| &v.mid_c2w),
+    ];
+    for (measure, camera) in measures {
+        let same = holding(camera);
+        let none = measure(&first, &same).unwrap();
+        assert!(
+            none.centre_pct < 1e-6 && none.rotation_deg < 1e-6,
+            "{none:?}"
+        );
+        let some = measure(&first, &moved(&same)).unwrap();
+        assert!(
+            some.centre_pct > 5.0 / n.sqrt() * 0.8 && some.centre_pct < 5.0,
+            "one of {n} cameras moved by 5 % of the extent: {some:?}"
+        );
+    }
 }
 
 #[test]
@@ -386,8 +417,8 @@ fn sfm_rerun_keeps_the_renders_model_only_as_its_probe_says() {
         let mut req = first_pass_request(&scene, &out, InitRequest::new(Init::Sfm));
         req.resume = resume;
         req.cfg.init.sfm_rerun_probe_fraction = 0.4;
-        // The probes choose, whatever the shift of the renders' cameras.
-        req.cfg.init.sfm_rerun_min_shift_pct = 0.0;
+        // The probes choose, wherever the renders' cameras lie.
+        req.cfg.init.sfm_rerun_confirm_pct = 0.0;
         train_scene(req).unwrap()
     };
     let first = run(false);
