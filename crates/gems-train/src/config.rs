@@ -253,11 +253,12 @@ pub struct InitConfig {
     /// accurate cameras (BENCHMARKS.md, "Why accurate cameras drift"); one that lands far from
     /// them found a correction the blurry photos' tracks hid. Measured (BENCHMARKS.md, "Keeping
     /// the first model when the renders' model confirms it"): on Deblur-NeRF's real `blurball`
-    /// 1.21 %, where the first model scores higher on the held-out views; on generated scenes
-    /// with 4–12 px of blur 0.48–0.59 %, the first model's cameras nearer the truth (twice to
-    /// four times) and its training +0.6 to +1.3 dB refined; on generated scenes with 15–29 px
-    /// of blur 1.92–21 %, the renders' cameras nearer the truth and their training better. 1.5
-    /// lies in the gap. Checked before any probe (`sfm_rerun_probe_fraction`);
+    /// 1.36 %, where the first model scores higher on the held-out views; on generated scenes
+    /// with 7–12 px of estimated blur 0.55–0.67 %, the first model's cameras 1.7–3.6× nearer
+    /// the truth and its training +0.6 to +1.5 dB refined; on generated scenes with 15–29 px
+    /// 1.82–23.5 %, the renders' cameras nearer the truth and their training better. 1.5 lies
+    /// in the gap; one 14 px scene at 1.19 % was mixed (first model +0.35 dB refined, renders'
+    /// model +0.9 dB at the midpoint). Checked before any probe (`sfm_rerun_probe_fraction`);
     /// `sfm_rerun/choice.json` records the figure. 0: never confirmed by this test.
     pub sfm_rerun_confirm_pct: f64,
     /// The renders' model is also set aside, as confirming the first model, when its cameras lie
