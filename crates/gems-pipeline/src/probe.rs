@@ -21,9 +21,9 @@
 //! `blurball`), and the first model trains better. Where the blur distorted the first model,
 //! the first pass moves its cameras toward the truth and the renders' model lands 1.8–23 % from
 //! the first model, nearer the truth (BENCHMARKS.md, "Keeping the first model when the renders'
-//! model confirms it"). The shift from the trained cameras does not separate
-//! the two: it is small on both kinds of scene whenever the renders are consistent with the
-//! cameras they were made at.
+//! model confirms it"). The shift from the trained cameras separates the two only in a narrow
+//! gap (0.38 to 0.43 %): it is small on both kinds of scene whenever the renders are
+//! consistent with the cameras they were made at.
 
 use std::path::{Path, PathBuf};
 
@@ -142,11 +142,11 @@ impl RerunChoice {
         }
     }
 
-    /// The choice with the measured [`renders_shift`] and [`renders_change`] recorded.
+    /// The choice with the measured [`renders_change`] and [`renders_shift`] recorded.
     pub fn with_measures(
         self,
-        shift: Option<CameraDiscrepancy>,
         change: Option<CameraDiscrepancy>,
+        shift: Option<CameraDiscrepancy>,
     ) -> Self {
         Self {
             shift_centre_pct: shift.map(|d| d.centre_pct),
@@ -320,19 +320,19 @@ mod tests {
                 rotation_deg: 0.1,
             })
         };
-        // Measured pairs (BENCHMARKS.md): blurball, and a 4 px scene whose shift from the
-        // trained cameras exceeded the rule before; a 16 px scene with a small shift, where the
-        // first pass had corrected the first model.
-        assert!(confirms_first_model(d(1.21), d(0.15), 1.5, 0.0));
-        assert!(confirms_first_model(d(0.58), d(0.38), 1.5, 0.0));
-        assert!(!confirms_first_model(d(2.10), d(0.43), 1.5, 0.0));
+        // Measured pairs (BENCHMARKS.md): blurball, and a 4 px scene (seed 25) whose shift from
+        // the trained cameras exceeded the rule before; a 16 px scene (seed 10) with a small
+        // shift, where the first pass had corrected the first model.
+        assert!(confirms_first_model(d(1.36), d(0.15), 1.5, 0.0));
+        assert!(confirms_first_model(d(0.64), d(0.38), 1.5, 0.0));
+        assert!(!confirms_first_model(d(2.22), d(0.43), 1.5, 0.0));
         assert!(
             !confirms_first_model(d(1.5), None, 1.5, 0.0),
             "strictly within"
         );
         // The shift confirms on its own when asked to.
-        assert!(confirms_first_model(d(2.10), d(0.43), 1.5, 0.5));
-        assert!(!confirms_first_model(d(2.10), d(0.43), 0.0, 0.3));
+        assert!(confirms_first_model(d(2.22), d(0.43), 1.5, 0.5));
+        assert!(!confirms_first_model(d(2.22), d(0.43), 0.0, 0.3));
         // Nothing measured, nothing confirmed.
         assert!(!confirms_first_model(None, None, 1e9, 1e9));
     }

@@ -272,7 +272,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                     ),
                 )
             }
-            .with_measures(shift, change);
+            .with_measures(change, shift);
             // Written (with its folder) also when the initialiser failed before making one.
             choice.write(&rerun)?;
             if choice.kept {

@@ -238,7 +238,7 @@ pub struct InitConfig {
     /// loss over the probe's second half (`sfm_rerun/choice.json` records both). The kept
     /// model's run proper continues from its probe, so the probes cost this fraction of the
     /// run proper once. Default 0 (off: the renders' model is kept whenever it registers every
-    /// trained view), because the choice depends on where the probe stops: on Deblur-NeRF's
+    /// trained view and does not confirm the first model, `sfm_rerun_confirm_pct`), because the choice depends on where the probe stops: on Deblur-NeRF's
     /// real `blurball`, where the first model is the better one (+1.0 dB on the held-out views,
     /// refined), and on `gems bench-quality`'s seed-5 scene, where the renders' model is (+1.8 dB
     /// refined deblurring, +3.2 dB refined novel views), 200 probe steps chose the first model
