@@ -254,7 +254,12 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                 ];
                 let mut losses = [0.0; 2];
                 for ((renders, candidate, dir), loss) in candidates.iter().zip(&mut losses) {
-                    let cfg = run_proper_config(&cfg, *renders, *renders, rest);
+                    let model = if *renders {
+                        RunProperModel::Renders
+                    } else {
+                        RunProperModel::First
+                    };
+                    let cfg = run_proper_config(&cfg, model, rest);
                     (*loss, engine) = probe(&scene, candidate, &cfg, probe_steps, engine, dir)?;
                 }
                 let choice = RerunChoice::from_probes(probe_steps, losses[0], losses[1]);
@@ -301,12 +306,14 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         if keep_rerun {
             mode = InitMode::Colmap(Some(rerun.join("sparse").join("0")));
         }
-        cfg = run_proper_config(
-            &cfg,
-            keep_rerun,
-            keep_rerun || choice.first_model_confirmed,
-            rest,
-        );
+        let model = if keep_rerun {
+            RunProperModel::Renders
+        } else if choice.first_model_confirmed {
+            RunProperModel::ConfirmedFirst
+        } else {
+            RunProperModel::First
+        };
+        cfg = run_proper_config(&cfg, model, rest);
     }
     train_and_report(TrainJob {
         scene: &req.scene,
@@ -338,23 +345,35 @@ fn focal_is_known(init: &InitRequest) -> Option<&'static str> {
     }
 }
 
+/// The model the run proper after a first pass starts from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum RunProperModel {
+    /// The first model, not confirmed by the SfM on the first pass's renders.
+    First,
+    /// The first model, confirmed by that SfM ([`RerunChoice::first_model_confirmed`]): its
+    /// cameras are measured accurate.
+    ConfirmedFirst,
+    /// The model the SfM made on the first pass's renders.
+    Renders,
+}
+
 /// The configuration of the run proper after a first pass, from the run's `cfg`: from the
 /// renders' model it has the `rest` of the steps, from the first model all of them; where its
-/// initial poses are accurate (the renders' model's, or the first model's when the renders'
-/// model confirmed it, [`RerunChoice::first_model_confirmed`]) it has straight paths first
-/// (`init.accurate_poses_straight_fraction`), otherwise `cfg`'s own paths. Either is one pass.
-fn run_proper_config(
-    cfg: &TrainConfig,
-    renders_model: bool,
-    accurate_poses: bool,
-    rest: usize,
-) -> TrainConfig {
+/// initial poses are accurate (the renders' model's, or the confirmed first model's) it has
+/// straight paths first (`init.accurate_poses_straight_fraction`), otherwise `cfg`'s own paths;
+/// from the confirmed first model its exposures' mean poses are held on their initial cameras
+/// (`init.confirmed_anchor_weight`, when above `cfg`'s `pose.anchor_weight`). Either is one
+/// pass.
+fn run_proper_config(cfg: &TrainConfig, model: RunProperModel, rest: usize) -> TrainConfig {
     let mut run = cfg.clone();
-    if renders_model {
+    if model == RunProperModel::Renders {
         run.steps = rest;
     }
-    if accurate_poses {
+    if model != RunProperModel::First {
         run.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
+    }
+    if model == RunProperModel::ConfirmedFirst {
+        run.pose.anchor_weight = cfg.pose.anchor_weight.max(cfg.init.confirmed_anchor_weight);
     }
     run.init.sfm_rerun_fraction = 0.0;
     run
@@ -821,29 +840,49 @@ mod tests {
     }
 
     #[test]
-    fn the_run_proper_has_straight_paths_first_only_from_accurate_poses() {
+    fn the_run_propers_paths_and_anchor_follow_where_it_starts() {
         let mut cfg = TrainConfig {
             steps: 300,
             ..TrainConfig::default()
         };
         cfg.pose.straight_fraction = 0.05;
+        cfg.pose.anchor_weight = 3.0;
         cfg.init.accurate_poses_straight_fraction = 0.2;
-        let paths =
-            |c: &TrainConfig| (c.steps, c.pose.straight_fraction, c.init.sfm_rerun_fraction);
-        // The renders' model: the rest of the steps, accurate poses.
+        cfg.init.confirmed_anchor_weight = 50.0;
+        let paths = |c: &TrainConfig| {
+            (
+                c.steps,
+                c.pose.straight_fraction,
+                c.pose.anchor_weight,
+                c.init.sfm_rerun_fraction,
+            )
+        };
+        // The renders' model: the rest of the steps, accurate poses, the run's own anchor.
         assert_eq!(
-            paths(&run_proper_config(&cfg, true, true, 200)),
-            (200, 0.2, 0.0)
+            paths(&run_proper_config(&cfg, RunProperModel::Renders, 200)),
+            (200, 0.2, 3.0, 0.0)
         );
-        // The first model confirmed by its renders: all the steps, accurate poses.
+        // The first model confirmed by its renders: all the steps, accurate poses, held.
         assert_eq!(
-            paths(&run_proper_config(&cfg, false, true, 200)),
-            (300, 0.2, 0.0)
+            paths(&run_proper_config(
+                &cfg,
+                RunProperModel::ConfirmedFirst,
+                200
+            )),
+            (300, 0.2, 50.0, 0.0)
+        );
+        // A run's own heavier anchor is kept.
+        cfg.pose.anchor_weight = 80.0;
+        assert_eq!(
+            run_proper_config(&cfg, RunProperModel::ConfirmedFirst, 200)
+                .pose
+                .anchor_weight,
+            80.0
         );
         // The first model because the renders' failed: all the steps, the run's own paths.
         assert_eq!(
-            paths(&run_proper_config(&cfg, false, false, 200)),
-            (300, 0.05, 0.0)
+            paths(&run_proper_config(&cfg, RunProperModel::First, 200)),
+            (300, 0.05, 80.0, 0.0)
         );
     }
 }

@@ -162,17 +162,19 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
             cfg.steps,
             cfg.init.sfm_rerun_fraction,
             cfg.pose.straight_fraction,
+            cfg.pose.anchor_weight,
         )
     };
     assert_eq!(
         steps(&out.join("first_pass")),
-        (10, 0.0, 0.0),
+        (10, 0.0, 0.0, 0.0),
         "first pass: half, with the run's own pose.straight_fraction"
     );
     assert_eq!(
         steps(&out),
-        (10, 0.0, 0.15),
-        "the run proper: the other half, with init.accurate_poses_straight_fraction"
+        (10, 0.0, 0.15, 0.0),
+        "the run proper: the other half, with init.accurate_poses_straight_fraction and, from \
+         the renders' model, no anchor"
     );
     // The second initialisation read renders named like the scene's images, at their size.
     let mut scene_names: Vec<String> = gems_fs::list_images(&scene.join("images"))
@@ -261,11 +263,13 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
         choice.reason
     );
     // The run proper trained from the first model with all the steps and, its cameras
-    // confirmed by the renders, straight paths first (the first pass had its own paths).
+    // confirmed by the renders, straight paths first and its exposures held on their initial
+    // cameras (the first pass had its own paths and no anchor).
     let cfg = TrainConfig::from_toml_file(&out.join("config.toml")).unwrap();
     let first_cfg =
         TrainConfig::from_toml_file(&out.join("first_pass").join("config.toml")).unwrap();
     assert!(cfg.init.accurate_poses_straight_fraction > 0.0);
+    assert!(cfg.init.confirmed_anchor_weight > 0.0);
     assert_eq!(
         (
             cfg.steps,
@@ -273,6 +277,10 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
             first_cfg.pose.straight_fraction
         ),
         (20, cfg.init.accurate_poses_straight_fraction, 0.0)
+    );
+    assert_eq!(
+        (cfg.pose.anchor_weight, first_cfg.pose.anchor_weight),
+        (cfg.init.confirmed_anchor_weight, 0.0)
     );
     let trained = gems_train::TrainOutput::load(&out).unwrap();
     assert!(!trained.init_label.contains("sfm_rerun"));

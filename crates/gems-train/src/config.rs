@@ -293,6 +293,18 @@ pub struct InitConfig {
     /// `sfm_rerun_straight_fraction`.
     #[serde(alias = "sfm_rerun_straight_fraction")]
     pub accurate_poses_straight_fraction: f64,
+    /// `pose.anchor_weight` of the run proper from a first model that the SfM on the first
+    /// pass's renders confirmed (`sfm_rerun_confirm_pct`, `sfm_rerun_min_shift_pct`): those
+    /// cameras are measured accurate, and training otherwise carries them off to where the
+    /// blurry photos' optimum lies (BENCHMARKS.md, "Why accurate cameras drift"). The larger of
+    /// this and the run's own `pose.anchor_weight` applies. Default 100 (the weight measured on
+    /// blurball from the dataset's poses): on two generated scenes whose first model was
+    /// confirmed (6 and 12 px of blur, 3000 steps) +0.1 / +2.5 dB at the trajectory midpoint,
+    /// +0.2 / +0.05 dB refined, +3.7 / +6.2 dB on the novel views at their initial poses and
+    /// +0.5 / ±0.0 dB refined, the cameras' drift 0.0055 → 0.0100 instead of 0.0129 on the
+    /// first (BENCHMARKS.md, "Holding a confirmed first model's cameras").
+    /// 0 = the run's own `pose.anchor_weight`.
+    pub confirmed_anchor_weight: f64,
     /// σ, as a fraction of the focal, of the prior under which the built-in SfM refines a focal
     /// read from the photos' EXIF (gems-pipeline; `gems_init::sfm::EXIF_FOCAL_PRIOR`, whose value
     /// this default is). 0 holds the EXIF focal fixed. A focal given on the command line is
@@ -328,6 +340,7 @@ impl Default for InitConfig {
             sfm_rerun_confirm_pct: 1.5,
             sfm_rerun_min_shift_pct: 0.0,
             accurate_poses_straight_fraction: 0.15,
+            confirmed_anchor_weight: 100.0,
             exif_focal_prior: 0.02,
         }
     }
@@ -580,6 +593,10 @@ impl TrainConfig {
             (
                 "init.sfm_rerun_min_shift_pct",
                 self.init.sfm_rerun_min_shift_pct,
+            ),
+            (
+                "init.confirmed_anchor_weight",
+                self.init.confirmed_anchor_weight,
             ),
         ] {
             if !(value.is_finite() && value >= 0.0) {
@@ -835,6 +852,13 @@ mod tests {
         assert!(c.validate().is_ok());
         c.init.accurate_poses_straight_fraction = 1.5;
         assert!(c.validate().unwrap_err().contains("straight_fraction"));
+        c.init.accurate_poses_straight_fraction = 0.15;
+        c.init.confirmed_anchor_weight = -1.0;
+        assert!(
+            c.validate()
+                .unwrap_err()
+                .contains("confirmed_anchor_weight")
+        );
         // Configurations saved under the field's first name still load.
         let old: TrainConfig =
             toml::from_str("[init]\nsfm_rerun_straight_fraction = 0.25").unwrap();
