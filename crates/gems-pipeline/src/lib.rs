@@ -15,7 +15,8 @@
 //!    better from it ([`probe`]); trainings
 //!    from accurate poses (that second model, the first one when the renders' model confirmed
 //!    it, or ground truth) take
-//!    `init.accurate_poses_straight_fraction` as their `pose.straight_fraction`;
+//!    `init.accurate_poses_straight_fraction` as their `pose.straight_fraction`, and the run
+//!    proper from a confirmed first model holds its cameras (`init.confirmed_anchor_weight`);
 //! 2. **training** (gems-train), with periodic atomic checkpoints and resume;
 //! 3. **exports**: `point_cloud.ply` (input frame), `model.json`, `config.toml`;
 //! 4. **evaluation and report** (gems-eval): `metrics.json`, trajectories, renders,
