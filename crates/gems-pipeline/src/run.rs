@@ -254,11 +254,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                 ];
                 let mut losses = [0.0; 2];
                 for ((renders, candidate, dir), loss) in candidates.iter().zip(&mut losses) {
-                    let model = if *renders {
-                        RunProperModel::Renders
-                    } else {
-                        RunProperModel::First
-                    };
+                    let model = RunProperModel::of(*renders, false);
                     let cfg = run_proper_config(&cfg, model, rest);
                     (*loss, engine) = probe(&scene, candidate, &cfg, probe_steps, engine, dir)?;
                 }
@@ -306,13 +302,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         if keep_rerun {
             mode = InitMode::Colmap(Some(rerun.join("sparse").join("0")));
         }
-        let model = if keep_rerun {
-            RunProperModel::Renders
-        } else if choice.first_model_confirmed {
-            RunProperModel::ConfirmedFirst
-        } else {
-            RunProperModel::First
-        };
+        let model = RunProperModel::of(keep_rerun, choice.first_model_confirmed);
         cfg = run_proper_config(&cfg, model, rest);
     }
     train_and_report(TrainJob {
@@ -355,6 +345,17 @@ enum RunProperModel {
     ConfirmedFirst,
     /// The model the SfM made on the first pass's renders.
     Renders,
+}
+
+impl RunProperModel {
+    /// From whether the renders' model is kept and whether it confirmed the first model.
+    fn of(renders_kept: bool, first_model_confirmed: bool) -> Self {
+        match (renders_kept, first_model_confirmed) {
+            (true, _) => Self::Renders,
+            (false, true) => Self::ConfirmedFirst,
+            (false, false) => Self::First,
+        }
+    }
 }
 
 /// The configuration of the run proper after a first pass, from the run's `cfg`: from the
