@@ -138,6 +138,17 @@ pub fn reruns_on_renders(init: Init) -> bool {
     matches!(init, Init::Sfm | Init::ColmapCli)
 }
 
+/// Whether a run from `init` trains a first pass and runs an initialiser on its sharp renders
+/// (`init.sfm_rerun_fraction`): the image initialisers ([`reruns_on_renders`]), whose model the
+/// renders' one may replace, and an imported COLMAP model, which the built-in SfM on the renders
+/// only measures: when it confirms the model (`init.sfm_rerun_confirm_pct`), the model's cameras
+/// are measured accurate and the run proper holds them (`init.confirmed_anchor_weight`);
+/// otherwise the run proper trains from the model as it is (and with `pose.optimize` off it is
+/// not checked: nothing moves its cameras). Ground-truth poses need no check.
+pub fn checked_on_renders(init: Init) -> bool {
+    reruns_on_renders(init) || init == Init::Colmap
+}
+
 /// The initialiser `req` names, run again on a first training's sharp renders: of the images in
 /// `source` (a scene folder or an image folder: what the first initialisation read), every view
 /// `first` trained on is replaced by its render at the mid-exposure pose (at the photo's own
@@ -173,10 +184,10 @@ pub fn rerun_init_on_renders(
             .and_then(|p| gems_data::image::image_dimensions(p).ok())
     };
     let renders = gems_eval::render_mid_exposure(engine, first, &sizes)?;
-    // The renders are made with the focal the first pass learned (`pose.focal_lr`): the SfM on
-    // them starts from it, at the photos' size, under the prior `learned_focal_prior` (0 holds
-    // it), instead of searching for one again.
-    let learned = (first.focal_factor != 1.0)
+    // The renders are made with the focal the first pass learned (`pose.focal_lr`) or, from an
+    // imported model, that model's own: the SfM on them starts from it, at the photos' size,
+    // under the prior `learned_focal_prior` (0 holds it), instead of searching for one again.
+    let learned = (first.focal_factor != 1.0 || req.init == Init::Colmap)
         .then(|| {
             first.views.iter().find_map(|v| {
                 let (w, _) = sizes(&v.name)?;
@@ -189,7 +200,7 @@ pub fn rerun_init_on_renders(
             tracing::info!(
                 focal_px = f,
                 factor = first.focal_factor,
-                "the SfM on the renders starts from the focal the first pass learned"
+                "the SfM on the renders starts from the focal the first pass used"
             );
             (
                 Some(f),

@@ -16,7 +16,10 @@
 //!    from accurate poses (that second model, the first one when the renders' model confirmed
 //!    it, or ground truth) take
 //!    `init.accurate_poses_straight_fraction` as their `pose.straight_fraction`, and the run
-//!    proper from a confirmed first model holds its cameras (`init.confirmed_anchor_weight`);
+//!    proper from a confirmed first model holds its cameras (`init.confirmed_anchor_weight`).
+//!    An imported COLMAP model gets the same first pass, and the built-in SfM on its renders
+//!    only measures it ([`checked_on_renders`]): confirmed, the model's cameras are held;
+//!    otherwise it is trained from as it is, never replaced;
 //! 2. **training** (gems-train), with periodic atomic checkpoints and resume;
 //! 3. **exports**: `point_cloud.ply` (input frame), `model.json`, `config.toml`;
 //! 4. **evaluation and report** (gems-eval): `metrics.json`, trajectories, renders,
@@ -41,8 +44,8 @@ mod run;
 pub use error::PipelineError;
 pub use gems_train::InitMode;
 pub use init::{
-    EventInit, Init, InitRequest, edi_images, rerun_init_on_renders, reruns_on_renders,
-    resolve_init, run_colmap, run_sfm, video_frames,
+    EventInit, Init, InitRequest, checked_on_renders, edi_images, rerun_init_on_renders,
+    reruns_on_renders, resolve_init, run_colmap, run_sfm, video_frames,
 };
 pub use protocol::{Headline, Protocol, ProtocolSettings};
 pub use run::{

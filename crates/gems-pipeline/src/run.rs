@@ -13,8 +13,8 @@ use gems_train::{TrainOutput, has_checkpoint, load_checkpoint, save_checkpoint};
 
 use crate::PipelineError;
 use crate::init::{
-    Init, InitRequest, init_images, place_missing_views, rerun_init_on_renders, reruns_on_renders,
-    resolve_init,
+    Init, InitRequest, checked_on_renders, init_images, place_missing_views, rerun_init_on_renders,
+    reruns_on_renders, resolve_init,
 };
 use crate::probe::{
     RerunChoice, confirms_first_model, continue_from, probe, remove_probe, renders_change,
@@ -134,8 +134,12 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
     let mut continues_probe = false;
     if let Some((first_steps, rest)) = cfg
         .sfm_rerun_split()
-        .filter(|_| reruns_on_renders(init.init))
+        .filter(|_| checked_on_renders(init.init))
+        // A model whose cameras training does not move needs no check.
+        .filter(|_| reruns_on_renders(init.init) || cfg.pose.optimize)
     {
+        // An imported model is only measured by the SfM on the renders, never replaced.
+        let imported = !reruns_on_renders(init.init);
         let rerun = req.output.join("sfm_rerun");
         let renders_model = rerun.join("sparse").join("0");
         // A resumed run keeps the choice an earlier one made (and the model it kept).
@@ -189,7 +193,11 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                 cfg.init.exif_focal_prior,
             );
             let rendered: Vec<String> = first.views.iter().map(|v| v.name.clone()).collect();
-            let accepted = accept_rerun(second, &mode, &rerun, &rendered)?;
+            let first_model = match &mode {
+                InitMode::Colmap(Some(dir)) if !imported => Some(dir.as_path()),
+                _ => None,
+            };
+            let accepted = accept_rerun(second, first_model, &rerun, &rendered)?;
             let (change, shift) = if accepted {
                 let renders = gems_data::colmap::read_model(&renders_model)?;
                 (
@@ -231,11 +239,26 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                     first_model_confirmed: true,
                     ..RerunChoice::without_probes(
                         false,
-                        format!(
-                            "{words}: it confirms the first model and brings nothing beyond it"
-                        ),
+                        if imported {
+                            format!(
+                                "{words}: it confirms the imported model, whose cameras the run \
+                                 proper holds"
+                            )
+                        } else {
+                            format!(
+                                "{words}: it confirms the first model and brings nothing beyond it"
+                            )
+                        },
                     )
                 }
+            } else if imported {
+                RerunChoice::without_probes(
+                    false,
+                    format!(
+                        "{words}: it does not confirm the imported model, which is trained from \
+                         as it is"
+                    ),
+                )
             } else if let Some(probe_steps) = cfg.sfm_rerun_probe_steps(rest) {
                 // Each candidate trains as its run proper would, and the kept one's run proper
                 // continues from its probe.
@@ -278,6 +301,8 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             choice.write(&rerun)?;
             if choice.kept {
                 tracing::info!(reason = %choice.reason, "training from the model initialised on the renders");
+            } else if imported {
+                tracing::info!(reason = %choice.reason, confirmed = choice.first_model_confirmed, "the imported model checked on the first pass's renders");
             } else {
                 tracing::warn!(
                     "the model initialised on the first pass's renders is not kept ({}); \
@@ -291,6 +316,12 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         description.init = if keep_rerun {
             format!(
                 "{}, then again on the first pass's sharp renders ({first_steps} + {rest} steps; {})",
+                description.init, choice.reason
+            )
+        } else if imported {
+            format!(
+                "{} (checked by the built-in SfM on the first pass's renders, {first_steps} steps: \
+                 {})",
                 description.init, choice.reason
             )
         } else {
@@ -452,36 +483,33 @@ fn peak_memory_bytes() -> Option<u64> {
     Some(kib * 1024)
 }
 
-/// Whether the model initialised on the first pass's renders may replace the first one: when the
-/// initialiser registered every `rendered` view the first model had (the probes then decide,
-/// [`crate::probe`]). Views the first model had and it lacks (held-out photos that did not
-/// register among the renders) are then placed by the similarity between the models
+/// Whether the model initialised on the first pass's renders may replace the first one or
+/// measure it: when the initialiser registered every `rendered` view (the views the first pass
+/// trained on; the confirmation and the probes then decide, [`crate::probe`]). With the first
+/// model's folder `first_model`, views it has and the renders' model lacks (held-out photos that
+/// did not register among the renders) are then placed by the similarity between the models
 /// ([`place_missing_views`]) and the model is rewritten. A rejected model's `sparse` folder is
 /// removed; its images stay for inspection.
 fn accept_rerun(
     second: Result<PathBuf, PipelineError>,
-    first: &InitMode,
+    first_model: Option<&Path>,
     rerun: &Path,
     rendered: &[String],
 ) -> Result<bool, PipelineError> {
-    let InitMode::Colmap(Some(first_dir)) = first else {
-        return Err(PipelineError::Config(
-            "initialising again on renders needs the first model's folder".into(),
-        ));
-    };
-    let first = gems_data::colmap::read_model(first_dir)?;
-    let rendered_in = |m: &gems_data::colmap::SparseModel| {
-        rendered
-            .iter()
-            .filter(|n| m.image_by_name(n).is_some())
-            .count()
-    };
     let reason = match second {
         Ok(dir) => {
             let mut model = gems_data::colmap::read_model(&dir)?;
-            let (views, before) = (rendered_in(&model), rendered_in(&first));
-            if views >= before {
-                let placed = place_missing_views(&first, &mut model);
+            let views = rendered
+                .iter()
+                .filter(|n| model.image_by_name(n).is_some())
+                .count();
+            if views >= rendered.len() {
+                let placed = match first_model {
+                    Some(first) => {
+                        place_missing_views(&gems_data::colmap::read_model(first)?, &mut model)
+                    }
+                    None => Vec::new(),
+                };
                 if !placed.is_empty() {
                     tracing::warn!(
                         "{} did not register among the renders; placed from the first model",
@@ -500,7 +528,10 @@ fn accept_rerun(
                 );
                 return Ok(true);
             }
-            format!("it registered {views} of the trained views, the first model {before}")
+            format!(
+                "it registered {views} of the {} trained views",
+                rendered.len()
+            )
         }
         Err(PipelineError::Sfm(e)) => format!("the initialiser failed on them: {e}"),
         Err(e) => return Err(e),
@@ -806,24 +837,31 @@ mod tests {
     fn the_rerun_model_is_kept_only_when_it_registers_every_trained_view() {
         let tmp = tempfile::tempdir().unwrap();
         let all = ["a.png", "b.png", "c.png"];
-        let first = InitMode::Colmap(Some(model_with(&tmp.path().join("first"), &all)));
+        let first = model_with(&tmp.path().join("first"), &all);
+        let first = Some(first.as_path());
         let rerun = tmp.path().join("rerun");
         let sparse = rerun.join("sparse").join("0");
         let trained: Vec<String> = all.iter().map(|n| (*n).to_owned()).collect();
 
         let second = model_with(&sparse, &all);
-        assert!(accept_rerun(Ok(second), &first, &rerun, &trained).unwrap());
+        assert!(accept_rerun(Ok(second), first, &rerun, &trained).unwrap());
         assert!(sparse.is_dir(), "an accepted model stays");
 
         // "c.png" held out: the second model lacks it and gets it placed from the first.
         let second = model_with(&sparse, &all[..2]);
-        assert!(accept_rerun(Ok(second), &first, &rerun, &trained[..2]).unwrap());
+        assert!(accept_rerun(Ok(second), first, &rerun, &trained[..2]).unwrap());
         let placed = gems_data::colmap::read_model(&sparse).unwrap();
         assert!(placed.image_by_name("c.png").is_some());
 
+        // Without the first model's folder (an imported model, only measured) nothing is placed.
+        let second = model_with(&sparse, &all[..2]);
+        assert!(accept_rerun(Ok(second), None, &rerun, &trained[..2]).unwrap());
+        let unplaced = gems_data::colmap::read_model(&sparse).unwrap();
+        assert!(unplaced.image_by_name("c.png").is_none());
+
         // "c.png" trained but lost: rejected, and the model removed.
         let second = model_with(&sparse, &all[..2]);
-        assert!(!accept_rerun(Ok(second), &first, &rerun, &trained).unwrap());
+        assert!(!accept_rerun(Ok(second), first, &rerun, &trained).unwrap());
         assert!(
             !rerun.join("sparse").exists(),
             "a rejected model is removed, so a resumed run decides again"
@@ -832,10 +870,10 @@ mod tests {
         let failed = Err(PipelineError::Sfm(gems_init::sfm::SfmError::TooFewImages(
             1,
         )));
-        assert!(!accept_rerun(failed, &first, &rerun, &trained).unwrap());
+        assert!(!accept_rerun(failed, first, &rerun, &trained).unwrap());
         let other = Err(PipelineError::Config("bad".into()));
         assert!(
-            accept_rerun(other, &first, &rerun, &trained).is_err(),
+            accept_rerun(other, first, &rerun, &trained).is_err(),
             "errors other than the initialiser's own stop the run"
         );
     }

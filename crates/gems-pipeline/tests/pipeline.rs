@@ -379,6 +379,97 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
 }
 
 #[test]
+fn an_imported_model_is_checked_on_the_renders_and_held_only_when_confirmed() {
+    let (dir, scene) = tiny_scene();
+    // The imported model: the built-in SfM's, written where a user's COLMAP model would be.
+    let imported = gems_pipeline::run_sfm(&scene, &dir.path().join("imported"), 5, None, None)
+        .expect("the SfM registers the tiny scene");
+    let run = |name: &str, confirm_pct: f64| {
+        let out = dir.path().join(name);
+        let init = InitRequest {
+            colmap_model: Some(imported.clone()),
+            ..InitRequest::new(Init::Colmap)
+        };
+        let mut req = first_pass_request(&scene, &out, init);
+        req.cfg.init.sfm_rerun_confirm_pct = confirm_pct;
+        train_scene(req).unwrap();
+        let choice = gems_pipeline::probe::RerunChoice::read(&out.join("sfm_rerun"))
+            .unwrap()
+            .expect("the check's choice is written");
+        let cfg = TrainConfig::from_toml_file(&out.join("config.toml")).unwrap();
+        let trained = gems_train::TrainOutput::load(&out).unwrap();
+        (choice, cfg, trained)
+    };
+
+    // No SfM on renders lands this far from the model's cameras: confirmed, and held.
+    let (choice, cfg, trained) = run("confirmed", 1e9);
+    assert!(!choice.kept && choice.first_model_confirmed, "{choice:?}");
+    assert!(choice.change_centre_pct.is_some_and(f64::is_finite));
+    assert_eq!(
+        (
+            cfg.steps,
+            cfg.pose.straight_fraction,
+            cfg.pose.anchor_weight
+        ),
+        (
+            20,
+            cfg.init.accurate_poses_straight_fraction,
+            cfg.init.confirmed_anchor_weight
+        ),
+        "all the steps from the imported model, straight paths first, its cameras held"
+    );
+    assert!(!trained.init_label.contains("sfm_rerun"));
+    let run_init = trained.run.unwrap().init;
+    assert!(
+        run_init.contains("checked by the built-in SfM") && run_init.contains("confirms"),
+        "{run_init}"
+    );
+    // The renders' SfM started from the imported model's focal, not a search of its own.
+    let focal =
+        |dir: &std::path::Path| gems_data::colmap::read_model(dir).unwrap().cameras[0].params[0];
+    let renders_focal = focal(&dir.path().join("confirmed/sfm_rerun/sparse/0"));
+    assert!(
+        (renders_focal / focal(&imported) - 1.0).abs() < 0.1,
+        "{renders_focal} against {}",
+        focal(&imported)
+    );
+
+    // Nothing confirms it: trained from as it is, never replaced, nothing held.
+    let (choice, cfg, trained) = run("unconfirmed", 0.0);
+    assert!(!choice.kept && !choice.first_model_confirmed, "{choice:?}");
+    assert!(
+        choice
+            .reason
+            .contains("does not confirm the imported model"),
+        "{}",
+        choice.reason
+    );
+    assert_eq!(
+        (
+            cfg.steps,
+            cfg.pose.straight_fraction,
+            cfg.pose.anchor_weight
+        ),
+        (20, 0.0, 0.0)
+    );
+    assert!(!trained.init_label.contains("sfm_rerun"));
+
+    // Cameras that training does not move are not checked: one pass.
+    let out = dir.path().join("fixed");
+    let mut req = first_pass_request(
+        &scene,
+        &out,
+        InitRequest {
+            colmap_model: Some(imported.clone()),
+            ..InitRequest::new(Init::Colmap)
+        },
+    );
+    req.cfg.pose.optimize = false;
+    train_scene(req).unwrap();
+    assert!(!out.join("first_pass").exists() && !out.join("sfm_rerun").exists());
+}
+
+#[test]
 fn the_probe_scores_exact_cameras_below_perturbed_ones() {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("scene");

@@ -223,8 +223,11 @@ pub struct InitConfig {
     /// (BENCHMARKS.md, "Structure from motion on the first pass's renders"). It needs a first
     /// pass long enough to render sharp images (hundreds of steps). Read by gems-pipeline,
     /// which writes the first pass to `first_pass/` and the second model to `sfm_rerun/`; the
-    /// run's own `config.toml` then holds the remaining steps and 0 here. Ignored for imported
-    /// COLMAP models and ground-truth poses. 0: one pass.
+    /// run's own `config.toml` then holds the remaining steps and 0 here. From an imported
+    /// COLMAP model the first pass only measures that model: the built-in SfM runs on its
+    /// renders, the run proper trains from the imported model with all the steps, and holds its
+    /// cameras (`confirmed_anchor_weight`) when the SfM confirmed them (`sfm_rerun_confirm_pct`).
+    /// Ignored for ground-truth poses. 0: one pass.
     pub sfm_rerun_fraction: f32,
     /// The shortest first pass `sfm_rerun_fraction` runs: below it (short runs, tests, the demo's
     /// 1000 steps) the run is one pass, because a first pass of a few hundred steps does not yet
@@ -278,9 +281,10 @@ pub struct InitConfig {
     /// +1.0 dB at the midpoint and +0.4 dB refined, at 4 px −0.2 / ±0.0 dB, on blurball's
     /// held-out views +1.0 dB at the dataset's poses and +0.1 dB refined; on a 4 px scene made
     /// afterwards +1.2 / +0.4 dB but −0.45 dB of refined novel views; BENCHMARKS.md,
-    /// "Straight paths first from a first model its renders confirmed"). Every other training
-    /// (from the blurry photos' SfM, an imported COLMAP model, perturbed ground truth, and the
-    /// first pass) uses `pose.straight_fraction`.
+    /// "Straight paths first from a first model its renders confirmed"; an imported COLMAP
+    /// model so confirmed is such a first model). Every other training (from the blurry photos'
+    /// SfM, an unconfirmed imported COLMAP model, perturbed ground truth, and the first pass)
+    /// uses `pose.straight_fraction`.
     /// Straight paths first help when the initial poses are accurate and hurt from the blurry
     /// photos' SfM (see `pose.straight_fraction`). From ground-truth poses 0.15 gained +0.85 dB
     /// refined deblurring, +0.9 dB refined novel views and +2.4 dB at the trajectory midpoint
