@@ -306,7 +306,10 @@ pub struct InitConfig {
     /// confirmed (6 and 12 px of blur, 3000 steps) +0.1 / +2.5 dB at the trajectory midpoint,
     /// +0.2 / +0.05 dB refined, +3.7 / +6.2 dB on the novel views at their initial poses and
     /// +0.5 / ±0.0 dB refined, the cameras' drift 0.0055 → 0.0100 instead of 0.0129 on the
-    /// first (BENCHMARKS.md, "Holding a confirmed first model's cameras").
+    /// first (BENCHMARKS.md, "Holding a confirmed first model's cameras"); from an imported
+    /// sharp-frame SfM model so confirmed (a held-out seed) +0.6 dB at the midpoint, +0.35 dB
+    /// refined, +4.6 dB on the novel views at their initial poses, the drift 2.7× less
+    /// (BENCHMARKS.md, "An imported COLMAP model checked on its renders").
     /// 0 = the run's own `pose.anchor_weight`.
     pub confirmed_anchor_weight: f64,
     /// σ, as a fraction of the focal, of the prior under which the built-in SfM refines a focal
