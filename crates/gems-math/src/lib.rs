@@ -49,7 +49,8 @@ pub use so3::{
 };
 pub use trajectory::{
     BEZIER_DEFAULT_KNOTS, Jacobian6, PathCentre, Trajectory, TrajectoryKind, anchor_energy,
-    bernstein, off_centre_energy, straighten_knots, uneven_speed_energy,
+    bernstein, hold_midpoint, midpoint_tangent_gradient, off_centre_energy, straighten_knots,
+    uneven_speed_energy,
 };
 
 /// Errors of the maths layer (bad sizes or degenerate geometry; never a panic on user data).

@@ -133,6 +133,14 @@ impl Trajectory {
         }
     }
 
+    fn knots_mut(&mut self) -> &mut [[f64; 6]] {
+        match self {
+            Trajectory::Bezier(k) => k,
+            Trajectory::Linear(k) => k,
+            Trajectory::CubicBSpline(k) => k,
+        }
+    }
+
     pub fn num_knots(&self) -> usize {
         self.knots().len()
     }
@@ -353,6 +361,72 @@ pub fn straighten_knots(knots: &mut [[f64; 6]]) {
         let slope = knots.iter().zip(&t).map(|(x, t)| x[i] * t).sum::<f64>() / tt;
         for (x, t) in knots.iter_mut().zip(&t) {
             x[i] = mean + slope * t;
+        }
+    }
+}
+
+/// Shifts every knot by one se(3) vector s so that the pose at u = ½ is the identity: the
+/// exposure's midpoint is held on the initial camera, c2w(½) = c2w_init, while the path keeps its
+/// shape about it (a common shift of the knots moves a path rigidly to first order, exactly for a
+/// straight path of [`straighten_knots`]). s solves Log Δ(½; ξ + s) = 0 by Newton's method on the
+/// right perturbation, Δ(½; ξ + s) ≈ Δ(½; ξ) · Exp((Σ_j J_j) s), with the J_j of
+/// [`Trajectory::eval_with_jacobians`]; it stops below `tol` in the tangent space or after
+/// `max_iter` iterations. Returns the final ‖Log Δ(½)‖.
+///
+/// The trainer applies it after every knot step (`pose.hold_midpoint`): a hard form of
+/// [`anchor_energy`], for cameras measured to be more accurate than the blurry photos can place
+/// them, which no weight of an energy holds without fighting the photometric gradient in Adam.
+pub fn hold_midpoint(traj: &mut Trajectory, tol: f64, max_iter: usize) -> f64 {
+    let mut residual = traj.eval(0.5).log();
+    for _ in 0..max_iter {
+        if residual.norm() <= tol {
+            break;
+        }
+        let (_, jacs) = traj.eval_with_jacobians(0.5);
+        let j_sum = jacs.iter().fold(Matrix6::<f64>::zeros(), |acc, j| {
+            acc + Matrix6::from_fn(|r, c| j[r][c])
+        });
+        // Δ · Exp(J s) = I  ⇔  J s = Log(Δ⁻¹) = −Log Δ; J is the identity for a path at rest.
+        let s = j_sum.lu().solve(&(-residual)).unwrap_or(-residual);
+        for k in traj.knots_mut() {
+            for (x, d) in k.iter_mut().zip(s.iter()) {
+                *x += d;
+            }
+        }
+        residual = traj.eval(0.5).log();
+    }
+    residual.norm()
+}
+
+/// Projects a knot gradient onto the directions that keep the pose at u = ½ where it is, the
+/// tangent of [`hold_midpoint`]'s constraint: g_j ← g_j − J_jᵀ λ with
+/// λ = (Σ_j J_j J_jᵀ)⁻¹ Σ_j J_j g_j, the J_j of [`Trajectory::eval_with_jacobians`] at u = ½, so
+/// that Σ_j J_j g_j = 0 afterwards. The trainer applies it before the knot Adam step when
+/// midpoints are held: Adam scales each coordinate by its own history, so a photometric pull on
+/// the midpoint that the hold undoes every step would otherwise dominate every knot's update and
+/// leave the path's shape unlearned.
+pub fn midpoint_tangent_gradient(traj: &Trajectory, grads: &mut [[f64; 6]]) {
+    let (_, jacs) = traj.eval_with_jacobians(0.5);
+    let js: Vec<Matrix6<f64>> = jacs
+        .iter()
+        .map(|j| Matrix6::from_fn(|r, c| j[r][c]))
+        .collect();
+    let jjt = js
+        .iter()
+        .fold(Matrix6::<f64>::zeros(), |acc, j| acc + j * j.transpose());
+    let jg = js
+        .iter()
+        .zip(grads.iter())
+        .fold(Vector6::<f64>::zeros(), |acc, (j, g)| {
+            acc + j * Vector6::from(*g)
+        });
+    let Some(lambda) = jjt.lu().solve(&jg) else {
+        return;
+    };
+    for (j, g) in js.iter().zip(grads.iter_mut()) {
+        let d = j.transpose() * lambda;
+        for (x, d) in g.iter_mut().zip(d.iter()) {
+            *x -= d;
         }
     }
 }

@@ -476,3 +476,104 @@ fn anchor_gradient_matches_finite_differences_and_measures_the_offset() {
     assert_eq!(anchor_energy(&shifted, &ts, 0.0, &mut zero), 0.0);
     assert_eq!(zero, vec![[0.0; 6]; 2]);
 }
+
+/// Holding the midpoint puts Δ(½) on the identity for every kind, from paths far off it, and
+/// moves the path rigidly: each pose relative to the midpoint, Δ(½)⁻¹ Δ(u), is kept to first
+/// order in the path's size (exactly for a constant-speed screw, whose factors commute).
+#[test]
+fn holding_the_midpoint_centres_the_path_and_keeps_its_shape() {
+    let u_grid = [0.0, 0.13, 0.5, 0.77, 1.0];
+    for kind in all_kinds() {
+        for scale in [0.01, 0.05, 0.2] {
+            let mut t = Trajectory::new(kind, knots(kind.knots(9), scale)).unwrap();
+            let before_mid = t.eval(0.5);
+            assert!(
+                before_mid.log().norm() > scale * 0.1,
+                "{kind:?}: not trivially"
+            );
+            let relative = |t: &Trajectory, u: f64| t.eval(0.5).inverse() * t.eval(u);
+            let shape: Vec<Se3> = u_grid.iter().map(|&u| relative(&t, u)).collect();
+            let size = t
+                .knots()
+                .iter()
+                .map(|k| Vector6::from(*k).norm())
+                .fold(0.0, f64::max);
+            let residual = hold_midpoint(&mut t, 1e-13, 20);
+            assert!(residual <= 1e-13, "{kind:?} scale {scale}: {residual}");
+            assert!(t.eval(0.5).log().norm() <= 1e-13);
+            // The shape changes only at second order in the path's size.
+            for (&u, s) in u_grid.iter().zip(&shape) {
+                let err = (relative(&t, u).inverse() * *s).log().norm();
+                assert!(
+                    err < size * size,
+                    "{kind:?} scale {scale} u {u}: {err} ({size})"
+                );
+            }
+        }
+    }
+    // A constant-speed screw off the camera (commuting factors) keeps its shape exactly.
+    let screw = [0.11, -0.07, 0.05, 0.04, -0.09, 0.06];
+    let line = (0..9)
+        .map(|j| screw.map(|x| x * (j as f64 / 8.0 + 0.3)))
+        .collect();
+    let mut t = Trajectory::new(TrajectoryKind::Bezier, line).unwrap();
+    let step = t.eval(0.25).inverse() * t.eval(0.75);
+    hold_midpoint(&mut t, 1e-14, 20);
+    let after = t.eval(0.25).inverse() * t.eval(0.75);
+    assert!(close(&step, &after, 1e-12));
+    // A centred path is a fixed point.
+    let before = t.clone();
+    hold_midpoint(&mut t, 1e-12, 20);
+    assert_eq!(t, before);
+}
+
+/// The projected gradient moves no knot combination that moves the midpoint (Σ_j J_j g_j = 0),
+/// and it is the orthogonal projection: idempotent, and what it removed is orthogonal to it.
+#[test]
+fn the_midpoint_tangent_gradient_leaves_the_midpoint_in_place() {
+    for kind in all_kinds() {
+        let t = Trajectory::new(kind, knots(kind.knots(9), 0.1)).unwrap();
+        let g0 = knots(t.num_knots(), 0.7)
+            .into_iter()
+            .map(|k| k.map(|x| x + 0.3))
+            .collect::<Vec<_>>();
+        let mut g = g0.clone();
+        midpoint_tangent_gradient(&t, &mut g);
+        let (_, jacs) = t.eval_with_jacobians(0.5);
+        let moved = |g: &[[f64; 6]]| {
+            (0..6)
+                .map(|r| {
+                    jacs.iter()
+                        .zip(g)
+                        .map(|(j, g)| (0..6).map(|c| j[r][c] * g[c]).sum::<f64>())
+                        .sum::<f64>()
+                        .powi(2)
+                })
+                .sum::<f64>()
+                .sqrt()
+        };
+        assert!(moved(&g0) > 0.1, "{kind:?}: not trivially");
+        assert!(moved(&g) < 1e-12, "{kind:?}: {}", moved(&g));
+        let dot = |a: &[[f64; 6]], b: &[[f64; 6]]| {
+            a.iter()
+                .zip(b)
+                .map(|(a, b)| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>())
+                .sum::<f64>()
+        };
+        let removed: Vec<[f64; 6]> = g0
+            .iter()
+            .zip(&g)
+            .map(|(a, b)| std::array::from_fn(|i| a[i] - b[i]))
+            .collect();
+        assert!(dot(&removed, &g).abs() < 1e-12, "{kind:?}: not orthogonal");
+        let mut again = g.clone();
+        midpoint_tangent_gradient(&t, &mut again);
+        assert!(
+            dot(&again, &again) - dot(&g, &g) < 1e-12
+                && again
+                    .iter()
+                    .zip(&g)
+                    .all(|(a, b)| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12))
+        );
+    }
+}

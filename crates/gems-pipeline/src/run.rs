@@ -394,8 +394,8 @@ impl RunProperModel {
 /// initial poses are accurate (the renders' model's, or the confirmed first model's) it has
 /// straight paths first (`init.accurate_poses_straight_fraction`), otherwise `cfg`'s own paths;
 /// from the confirmed first model its exposures' mean poses are held on their initial cameras
-/// (`init.confirmed_anchor_weight`, when above `cfg`'s `pose.anchor_weight`). Either is one
-/// pass.
+/// (`init.confirmed_anchor_weight`, when above `cfg`'s `pose.anchor_weight`), and their midpoints
+/// too with `init.confirmed_hold_midpoint`. Either is one pass.
 fn run_proper_config(cfg: &TrainConfig, model: RunProperModel, rest: usize) -> TrainConfig {
     let mut run = cfg.clone();
     if model == RunProperModel::Renders {
@@ -406,6 +406,7 @@ fn run_proper_config(cfg: &TrainConfig, model: RunProperModel, rest: usize) -> T
     }
     if model == RunProperModel::ConfirmedFirst {
         run.pose.anchor_weight = cfg.pose.anchor_weight.max(cfg.init.confirmed_anchor_weight);
+        run.pose.hold_midpoint |= cfg.init.confirmed_hold_midpoint;
     }
     run.init.sfm_rerun_fraction = 0.0;
     run
@@ -888,18 +889,20 @@ mod tests {
         cfg.pose.anchor_weight = 3.0;
         cfg.init.accurate_poses_straight_fraction = 0.2;
         cfg.init.confirmed_anchor_weight = 50.0;
+        cfg.init.confirmed_hold_midpoint = true;
         let paths = |c: &TrainConfig| {
             (
                 c.steps,
                 c.pose.straight_fraction,
                 c.pose.anchor_weight,
+                c.pose.hold_midpoint,
                 c.init.sfm_rerun_fraction,
             )
         };
         // The renders' model: the rest of the steps, accurate poses, the run's own anchor.
         assert_eq!(
             paths(&run_proper_config(&cfg, RunProperModel::Renders, 200)),
-            (200, 0.2, 3.0, 0.0)
+            (200, 0.2, 3.0, false, 0.0)
         );
         // The first model confirmed by its renders: all the steps, accurate poses, held.
         assert_eq!(
@@ -908,8 +911,22 @@ mod tests {
                 RunProperModel::ConfirmedFirst,
                 200
             )),
-            (300, 0.2, 50.0, 0.0)
+            (300, 0.2, 50.0, true, 0.0)
         );
+        // Not held when the option is off, unless the run holds every start itself.
+        cfg.init.confirmed_hold_midpoint = false;
+        assert!(
+            !run_proper_config(&cfg, RunProperModel::ConfirmedFirst, 200)
+                .pose
+                .hold_midpoint
+        );
+        cfg.pose.hold_midpoint = true;
+        assert!(
+            run_proper_config(&cfg, RunProperModel::Renders, 200)
+                .pose
+                .hold_midpoint
+        );
+        cfg.pose.hold_midpoint = false;
         // A run's own heavier anchor is kept.
         cfg.pose.anchor_weight = 80.0;
         assert_eq!(
@@ -921,7 +938,7 @@ mod tests {
         // The first model because the renders' failed: all the steps, the run's own paths.
         assert_eq!(
             paths(&run_proper_config(&cfg, RunProperModel::First, 200)),
-            (300, 0.05, 80.0, 0.0)
+            (300, 0.05, 80.0, false, 0.0)
         );
     }
 }

@@ -128,6 +128,17 @@ pub struct PoseConfig {
     /// (BENCHMARKS.md, "Keeping accurate cameras"): for accurate starts only
     /// (`configs/accurate-cameras.toml`).
     pub anchor_weight: f64,
+    /// Each view's knot gradient is projected onto the directions that leave the pose at u = ½
+    /// in place ([`gems_math::midpoint_tangent_gradient`]) before the knot Adam step, and after
+    /// it (and the straight-path projection) the knots are shifted together so that the pose at
+    /// u = ½ is the initial camera ([`gems_math::hold_midpoint`]): the exposure's midpoint stays
+    /// where the initial model put it and only the path's shape is learned. Without the first
+    /// half Adam's per-coordinate steps follow the photometric pull on the midpoint, which the
+    /// shift undoes, and the paths barely learn their shape. A hard form of `anchor_weight`, for cameras
+    /// measured more accurate than the blurry photos place them: the truth is not a stationary
+    /// point of the joint training (BENCHMARKS.md, "Why accurate cameras drift"). Default false
+    /// (the GeMS paper); runs from a confirmed first model use `init.confirmed_hold_midpoint`.
+    pub hold_midpoint: bool,
     /// Adam learning rate of the log of one factor on every view's focal lengths (a shared
     /// zoom about the principal points), learned from the photometric loss with the
     /// trajectories and decayed as their lr: an SfM's focal estimated from blurred photos can
@@ -153,6 +164,7 @@ impl Default for PoseConfig {
             off_centre_target: gems_math::PathCentre::Mean,
             straight_fraction: 0.0,
             anchor_weight: 0.0,
+            hold_midpoint: false,
             focal_lr: 0.0,
         }
     }
@@ -312,6 +324,10 @@ pub struct InitConfig {
     /// (BENCHMARKS.md, "An imported COLMAP model checked on its renders").
     /// 0 = the run's own `pose.anchor_weight`.
     pub confirmed_anchor_weight: f64,
+    /// `pose.hold_midpoint` of the run proper from a confirmed first model (as
+    /// `confirmed_anchor_weight`): its exposures' midpoints stay on the confirmed cameras.
+    /// Either this or the run's own `pose.hold_midpoint` holds them.
+    pub confirmed_hold_midpoint: bool,
     /// σ, as a fraction of the focal, of the prior under which the built-in SfM refines a focal
     /// read from the photos' EXIF (gems-pipeline; `gems_init::sfm::EXIF_FOCAL_PRIOR`, whose value
     /// this default is). 0 holds the EXIF focal fixed. A focal given on the command line is
@@ -348,6 +364,7 @@ impl Default for InitConfig {
             sfm_rerun_min_shift_pct: 0.0,
             accurate_poses_straight_fraction: 0.15,
             confirmed_anchor_weight: 100.0,
+            confirmed_hold_midpoint: false,
             exif_focal_prior: 0.02,
         }
     }

@@ -6,8 +6,10 @@
 //! fraction of the run at a coarser size, against the area-averaged image), average, fused loss
 //! (1−λ)·L1 + λ·(1 − SSIM_valid) + MCMC regularisers, backward, Adam on every Gaussian group,
 //! knot gradients summed and applied every `accumulate_steps` (and, for the first
-//! `straight_fraction` of the run, the knots projected onto straight lines), then MCMC relocation/growth on
-//! refinement steps and SGLD noise with the already decayed means lr.
+//! `straight_fraction` of the run, the knots projected onto straight lines; with `hold_midpoint`,
+//! the gradient and then the knots projected so that each exposure's midpoint stays on its
+//! initial camera), then MCMC relocation/growth on refinement steps and SGLD noise with the
+//! already decayed means lr.
 //!
 //! Everything that changes during training lives in [`TrainState`], which checkpoints save and
 //! resume restores, so a resumed run continues bit-identically.
@@ -994,6 +996,22 @@ impl Trainer {
                 beta2: c.adam_beta2,
                 eps: c.adam_eps,
             };
+            if c.pose.hold_midpoint {
+                for v in 0..self.views.len() {
+                    let traj = trajectory_of(c, &self.state.knots, v);
+                    let acc = &mut self.state.knot_grad_acc[v * k * 6..(v + 1) * k * 6];
+                    let mut g: Vec<[f64; 6]> = acc
+                        .chunks_exact(6)
+                        .map(|g| std::array::from_fn(|i| g[i] as f64))
+                        .collect();
+                    gems_math::midpoint_tangent_gradient(&traj, &mut g);
+                    for (a, g) in acc.chunks_exact_mut(6).zip(&g) {
+                        for (a, g) in a.iter_mut().zip(g) {
+                            *a = *g as f32;
+                        }
+                    }
+                }
+            }
             self.state.knot_adam.step(
                 &mut self.state.knots,
                 &self.state.knot_grad_acc,
@@ -1002,12 +1020,22 @@ impl Trainer {
                 h,
             );
             self.state.knot_grad_acc.fill(0.0);
-            if step < c.steps_of(c.pose.straight_fraction) {
+            let straighten = step < c.steps_of(c.pose.straight_fraction);
+            if straighten || c.pose.hold_midpoint {
                 for v in 0..self.views.len() {
-                    let mut line = trajectory_of(c, &self.state.knots, v).knots().to_vec();
-                    gems_math::straighten_knots(&mut line);
+                    let mut traj = trajectory_of(c, &self.state.knots, v);
+                    if straighten {
+                        let mut line = traj.knots().to_vec();
+                        gems_math::straighten_knots(&mut line);
+                        traj = Trajectory::new(c.trajectory, line)
+                            .expect("straightening keeps the knot count");
+                    }
+                    if c.pose.hold_midpoint {
+                        // f32 knots: a residual far below their rounding is exact enough.
+                        gems_math::hold_midpoint(&mut traj, 1e-10, 8);
+                    }
                     let view = &mut self.state.knots[v * k * 6..(v + 1) * k * 6];
-                    for (x, l) in view.chunks_exact_mut(6).zip(&line) {
+                    for (x, l) in view.chunks_exact_mut(6).zip(traj.knots()) {
                         for (x, l) in x.iter_mut().zip(l) {
                             *x = *l as f32;
                         }
