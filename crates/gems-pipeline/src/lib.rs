@@ -16,7 +16,7 @@
 //!    from accurate poses (that second model, the first one when the renders' model confirmed
 //!    it, or ground truth) take
 //!    `init.accurate_poses_straight_fraction` as their `pose.straight_fraction`, and the run
-//!    proper from a confirmed first model holds its cameras (`init.confirmed_anchor_weight`).
+//!    proper from a confirmed first model holds its cameras (`init.confirmed_hold_midpoint`).
 //!    An imported COLMAP model gets the same first pass, and the built-in SfM on its renders
 //!    only measures it ([`checked_on_renders`]): confirmed, the model's cameras are held;
 //!    otherwise it is trained from as it is, never replaced;

@@ -394,8 +394,9 @@ impl RunProperModel {
 /// initial poses are accurate (the renders' model's, or the confirmed first model's) it has
 /// straight paths first (`init.accurate_poses_straight_fraction`), otherwise `cfg`'s own paths;
 /// from the confirmed first model its exposures' mean poses are held on their initial cameras
-/// (`init.confirmed_anchor_weight`, when above `cfg`'s `pose.anchor_weight`), and their midpoints
-/// too with `init.confirmed_hold_midpoint`. Either is one pass.
+/// by `init.confirmed_hold_midpoint` (the midpoints, exactly), or else by
+/// `init.confirmed_anchor_weight` (the mean poses, when above `cfg`'s `pose.anchor_weight`).
+/// Either is one pass.
 fn run_proper_config(cfg: &TrainConfig, model: RunProperModel, rest: usize) -> TrainConfig {
     let mut run = cfg.clone();
     if model == RunProperModel::Renders {
@@ -405,8 +406,12 @@ fn run_proper_config(cfg: &TrainConfig, model: RunProperModel, rest: usize) -> T
         run.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
     }
     if model == RunProperModel::ConfirmedFirst {
-        run.pose.anchor_weight = cfg.pose.anchor_weight.max(cfg.init.confirmed_anchor_weight);
-        run.pose.hold_midpoint |= cfg.init.confirmed_hold_midpoint;
+        if cfg.init.confirmed_hold_midpoint {
+            // The hold supersedes the soft anchor (measured without it).
+            run.pose.hold_midpoint = true;
+        } else {
+            run.pose.anchor_weight = cfg.pose.anchor_weight.max(cfg.init.confirmed_anchor_weight);
+        }
     }
     run.init.sfm_rerun_fraction = 0.0;
     run
@@ -911,14 +916,17 @@ mod tests {
                 RunProperModel::ConfirmedFirst,
                 200
             )),
-            (300, 0.2, 50.0, true, 0.0)
+            (300, 0.2, 3.0, true, 0.0)
         );
-        // Not held when the option is off, unless the run holds every start itself.
+        // Without the hold, the confirmed anchor, unless the run holds every start itself.
         cfg.init.confirmed_hold_midpoint = false;
-        assert!(
-            !run_proper_config(&cfg, RunProperModel::ConfirmedFirst, 200)
-                .pose
-                .hold_midpoint
+        assert_eq!(
+            paths(&run_proper_config(
+                &cfg,
+                RunProperModel::ConfirmedFirst,
+                200
+            )),
+            (300, 0.2, 50.0, false, 0.0)
         );
         cfg.pose.hold_midpoint = true;
         assert!(

@@ -263,13 +263,13 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
         choice.reason
     );
     // The run proper trained from the first model with all the steps and, its cameras
-    // confirmed by the renders, straight paths first and its exposures held on their initial
-    // cameras (the first pass had its own paths and no anchor).
+    // confirmed by the renders, straight paths first and its exposures' midpoints held on their
+    // initial cameras (the first pass had its own paths, free).
     let cfg = TrainConfig::from_toml_file(&out.join("config.toml")).unwrap();
     let first_cfg =
         TrainConfig::from_toml_file(&out.join("first_pass").join("config.toml")).unwrap();
     assert!(cfg.init.accurate_poses_straight_fraction > 0.0);
-    assert!(cfg.init.confirmed_anchor_weight > 0.0);
+    assert!(cfg.init.confirmed_hold_midpoint);
     assert_eq!(
         (
             cfg.steps,
@@ -279,8 +279,8 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
         (20, cfg.init.accurate_poses_straight_fraction, 0.0)
     );
     assert_eq!(
-        (cfg.pose.anchor_weight, first_cfg.pose.anchor_weight),
-        (cfg.init.confirmed_anchor_weight, 0.0)
+        (cfg.pose.hold_midpoint, first_cfg.pose.hold_midpoint),
+        (true, false)
     );
     let trained = gems_train::TrainOutput::load(&out).unwrap();
     assert!(!trained.init_label.contains("sfm_rerun"));
@@ -409,13 +409,9 @@ fn an_imported_model_is_checked_on_the_renders_and_held_only_when_confirmed() {
         (
             cfg.steps,
             cfg.pose.straight_fraction,
-            cfg.pose.anchor_weight
+            cfg.pose.hold_midpoint
         ),
-        (
-            20,
-            cfg.init.accurate_poses_straight_fraction,
-            cfg.init.confirmed_anchor_weight
-        ),
+        (20, cfg.init.accurate_poses_straight_fraction, true),
         "all the steps from the imported model, straight paths first, its cameras held"
     );
     assert!(!trained.init_label.contains("sfm_rerun"));
@@ -448,9 +444,10 @@ fn an_imported_model_is_checked_on_the_renders_and_held_only_when_confirmed() {
         (
             cfg.steps,
             cfg.pose.straight_fraction,
-            cfg.pose.anchor_weight
+            cfg.pose.anchor_weight,
+            cfg.pose.hold_midpoint
         ),
-        (20, 0.0, 0.0)
+        (20, 0.0, 0.0, false)
     );
     assert!(!trained.init_label.contains("sfm_rerun"));
 
