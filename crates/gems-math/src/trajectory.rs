@@ -382,10 +382,9 @@ pub fn hold_midpoint(traj: &mut Trajectory, tol: f64, max_iter: usize) -> f64 {
         if residual.norm() <= tol {
             break;
         }
-        let (_, jacs) = traj.eval_with_jacobians(0.5);
-        let j_sum = jacs.iter().fold(Matrix6::<f64>::zeros(), |acc, j| {
-            acc + Matrix6::from_fn(|r, c| j[r][c])
-        });
+        let j_sum = midpoint_jacobians(traj)
+            .iter()
+            .fold(Matrix6::<f64>::zeros(), |acc, j| acc + j);
         // Δ · Exp(J s) = I  ⇔  J s = Log(Δ⁻¹) = −Log Δ; J is the identity for a path at rest.
         let s = j_sum.lu().solve(&(-residual)).unwrap_or(-residual);
         for k in traj.knots_mut() {
@@ -406,11 +405,7 @@ pub fn hold_midpoint(traj: &mut Trajectory, tol: f64, max_iter: usize) -> f64 {
 /// the midpoint that the hold undoes every step would otherwise dominate every knot's update and
 /// leave the path's shape unlearned.
 pub fn midpoint_tangent_gradient(traj: &Trajectory, grads: &mut [[f64; 6]]) {
-    let (_, jacs) = traj.eval_with_jacobians(0.5);
-    let js: Vec<Matrix6<f64>> = jacs
-        .iter()
-        .map(|j| Matrix6::from_fn(|r, c| j[r][c]))
-        .collect();
+    let js = midpoint_jacobians(traj);
     let jjt = js
         .iter()
         .fold(Matrix6::<f64>::zeros(), |acc, j| acc + j * j.transpose());
@@ -429,6 +424,14 @@ pub fn midpoint_tangent_gradient(traj: &Trajectory, grads: &mut [[f64; 6]]) {
             *x -= d;
         }
     }
+}
+
+/// The knot Jacobians J_j of the pose at u = ½ ([`Trajectory::eval_with_jacobians`]).
+fn midpoint_jacobians(traj: &Trajectory) -> Vec<Matrix6<f64>> {
+    let (_, jacs) = traj.eval_with_jacobians(0.5);
+    jacs.iter()
+        .map(|j| Matrix6::from_fn(|r, c| j[r][c]))
+        .collect()
 }
 
 /// Weights that pick the median of `logs` along their principal axis: 1 on the middle pose, or

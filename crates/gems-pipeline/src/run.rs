@@ -393,9 +393,9 @@ impl RunProperModel {
 /// renders' model it has the `rest` of the steps, from the first model all of them; where its
 /// initial poses are accurate (the renders' model's, or the confirmed first model's) it has
 /// straight paths first (`init.accurate_poses_straight_fraction`), otherwise `cfg`'s own paths;
-/// from the confirmed first model its exposures' mean poses are held on their initial cameras
-/// by `init.confirmed_hold_midpoint` (the midpoints, exactly), or else by
-/// `init.confirmed_anchor_weight` (the mean poses, when above `cfg`'s `pose.anchor_weight`).
+/// from the confirmed first model its exposures are held on their initial cameras: their
+/// midpoints exactly with `init.confirmed_hold_midpoint`, otherwise their mean poses by
+/// `init.confirmed_anchor_weight` (when above `cfg`'s `pose.anchor_weight`).
 /// Either is one pass.
 fn run_proper_config(cfg: &TrainConfig, model: RunProperModel, rest: usize) -> TrainConfig {
     let mut run = cfg.clone();
