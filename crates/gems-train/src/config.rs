@@ -125,8 +125,9 @@ pub struct PoseConfig {
     /// 22.53 to 28.45 dB and refined from 28.08 to 28.72 dB (BENCHMARKS.md, "Real data"); on a
     /// generated scene from the SfM on its sharp frames +3.5 dB at the initial pose and half the
     /// camera drift, but from the SfM on its blurry photos −3.6 dB at the midpoint
-    /// (BENCHMARKS.md, "Keeping accurate cameras"): for accurate starts only
-    /// (`configs/accurate-cameras.toml`).
+    /// (BENCHMARKS.md, "Keeping accurate cameras"): for accurate starts only, where
+    /// `hold_midpoint` has since scored higher (blurball 28.41 / 28.75 dB against 28.27 / 28.55
+    /// in one build; `configs/accurate-cameras.toml` sets it instead).
     pub anchor_weight: f64,
     /// Each view's knot gradient is projected onto the directions that leave the pose at u = ½
     /// in place ([`gems_math::midpoint_tangent_gradient`]) before the knot Adam step, and after
@@ -137,7 +138,11 @@ pub struct PoseConfig {
     /// shift undoes, and the paths barely learn their shape. A hard form of `anchor_weight`, for cameras
     /// measured more accurate than the blurry photos place them: the truth is not a stationary
     /// point of the joint training (BENCHMARKS.md, "Why accurate cameras drift"). Default false
-    /// (the GeMS paper); runs from a confirmed first model use `init.confirmed_hold_midpoint`.
+    /// (the GeMS paper); runs from a confirmed first model use `init.confirmed_hold_midpoint`,
+    /// and `configs/accurate-cameras.toml` sets it for cameras the user vouches for (blurball
+    /// from its dataset's model: 28.41 dB at the dataset's pose, 28.75 refined, against 28.27 /
+    /// 28.55 with `anchor_weight = 100`; BENCHMARKS.md, "Holding a confirmed model's
+    /// midpoints").
     pub hold_midpoint: bool,
     /// Adam learning rate of the log of one factor on every view's focal lengths (a shared
     /// zoom about the principal points), learned from the photometric loss with the
