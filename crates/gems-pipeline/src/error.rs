@@ -57,6 +57,8 @@ pub enum PipelineError {
     #[error(transparent)]
     Splat(#[from] gems_splat::SplatError),
     #[error(transparent)]
+    Engine(#[from] gems_gpu::GpuError),
+    #[error(transparent)]
     Eval(#[from] gems_eval::EvalError),
     #[error(transparent)]
     Lpips(#[from] gems_metrics::LpipsError),

@@ -16,7 +16,9 @@
 //!    from accurate poses (that second model, the first one when the renders' model confirmed
 //!    it, or ground truth) take
 //!    `init.accurate_poses_straight_fraction` as their `pose.straight_fraction`, and the run
-//!    proper from a confirmed first model holds its cameras (`init.confirmed_hold_midpoint`).
+//!    proper from a confirmed first model holds its cameras (`init.confirmed_hold_midpoint`)
+//!    and, with `init.confirmed_dense_points`, starts from dense points fused from the first
+//!    pass's depth maps ([`dense`]).
 //!    An imported COLMAP model gets the same first pass, and the built-in SfM on its renders
 //!    only measures it ([`checked_on_renders`]): confirmed, the model's cameras are held;
 //!    otherwise it is trained from as it is, never replaced;
@@ -34,6 +36,7 @@
 //! asks for them (`progress: true`, what the command line does); a library user leaves them off
 //! and reads the step reports from the DEBUG logs.
 
+pub mod dense;
 mod error;
 mod init;
 pub mod probe;

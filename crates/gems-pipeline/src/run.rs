@@ -12,6 +12,7 @@ use gems_train::{InitMode, prepare_input};
 use gems_train::{TrainOutput, has_checkpoint, load_checkpoint, save_checkpoint};
 
 use crate::PipelineError;
+use crate::dense;
 use crate::init::{
     Init, InitRequest, checked_on_renders, init_images, place_missing_views, rerun_init_on_renders,
     reruns_on_renders, resolve_init,
@@ -333,6 +334,27 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         if keep_rerun {
             mode = InitMode::Colmap(Some(rerun.join("sparse").join("0")));
         }
+        if !keep_rerun
+            && choice.first_model_confirmed
+            && cfg.init.confirmed_dense_points
+            && let InitMode::Colmap(Some(first_model)) = &mode
+        {
+            let dense = rerun.join("dense").join("sparse").join("0");
+            let added = add_dense_points(
+                &mut engine,
+                &req.output.join("first_pass"),
+                first_model,
+                &dense,
+                &cfg,
+                req.resume,
+            )?;
+            description.init = format!(
+                "{}, with {} dense points from the first pass's depth maps (init.confirmed_dense_points)",
+                description.init,
+                added.map_or_else(|| "the earlier run's".to_owned(), |n| n.to_string())
+            );
+            mode = InitMode::Colmap(Some(dense));
+        }
         let model = RunProperModel::of(keep_rerun, choice.first_model_confirmed);
         cfg = run_proper_config(&cfg, model, rest);
     }
@@ -350,6 +372,39 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         run: Some(description),
         started,
     })
+}
+
+/// Writes into `dense` the confirmed first model at `first_model` with dense points from the
+/// first pass in `first_pass` ([`dense::with_dense_points`]), up to `init.min_points` points in
+/// all, and returns how many it added; a resumed run reuses the model an earlier one wrote
+/// (`None`).
+fn add_dense_points(
+    engine: &mut Engine,
+    first_pass: &Path,
+    first_model: &Path,
+    dense: &Path,
+    cfg: &TrainConfig,
+    resume: bool,
+) -> Result<Option<usize>, PipelineError> {
+    if resume && dense.join("points3D.bin").is_file() {
+        return Ok(None);
+    }
+    let first = TrainOutput::load(first_pass)?;
+    let model = gems_data::colmap::read_model(first_model)?;
+    let target = cfg
+        .init
+        .min_points
+        .min(cfg.mcmc.cap_max)
+        .saturating_sub(model.points.len());
+    let (with_dense, added) = dense::with_dense_points(engine, &first, &model, target)?;
+    gems_data::colmap::write_model(dense, &with_dense, gems_data::colmap::ModelFormat::Binary)?;
+    tracing::info!(
+        added,
+        sparse = model.points.len(),
+        model = %dense.display(),
+        "dense points from the first pass's depth maps"
+    );
+    Ok(Some(added))
 }
 
 /// Why the initialisation's focal is to be kept as it is (`pose.focal_lr` then does not apply),

@@ -467,6 +467,63 @@ fn an_imported_model_is_checked_on_the_renders_and_held_only_when_confirmed() {
 }
 
 #[test]
+fn a_confirmed_model_starts_from_dense_points_when_asked() {
+    let (dir, scene) = tiny_scene();
+    let imported = gems_pipeline::run_sfm(&scene, &dir.path().join("imported"), 5, None, None)
+        .expect("the SfM registers the tiny scene");
+    let out = dir.path().join("dense");
+    let request = |resume: bool| {
+        let init = InitRequest {
+            colmap_model: Some(imported.clone()),
+            ..InitRequest::new(Init::Colmap)
+        };
+        let mut req = first_pass_request(&scene, &out, init);
+        req.cfg.init.sfm_rerun_confirm_pct = 1e9;
+        req.cfg.init.confirmed_dense_points = true;
+        req.resume = resume;
+        req
+    };
+    let run = train_scene(request(false)).unwrap();
+
+    // The run proper trained from the imported model's cameras with the first pass's dense
+    // points beside its own.
+    let dense_dir = out.join("sfm_rerun").join("dense").join("sparse").join("0");
+    let (model, dense) = (
+        gems_data::colmap::read_model(&imported).unwrap(),
+        gems_data::colmap::read_model(&dense_dir).unwrap(),
+    );
+    assert_eq!(model.images, dense.images);
+    assert_eq!(model.points, dense.points[..model.points.len()]);
+    let added = dense.points.len() - model.points.len();
+    assert!(added > 0, "no dense points");
+    let cfg = TrainConfig::from_toml_file(&out.join("config.toml")).unwrap();
+    assert!(added + model.points.len() <= cfg.init.min_points);
+    let trained = gems_train::TrainOutput::load(&out).unwrap();
+    assert!(
+        trained.init_label.contains("dense"),
+        "{}",
+        trained.init_label
+    );
+    let run_init = trained.run.unwrap().init;
+    assert!(
+        run_init.contains(&format!("with {added} dense points")),
+        "{run_init}"
+    );
+
+    // Resumed after the first pass: the dense model is reused, and the run is the same.
+    let cloud = std::fs::read(&run.point_cloud).unwrap();
+    for f in [
+        "checkpoint.json",
+        "checkpoint.safetensors",
+        "point_cloud.ply",
+    ] {
+        std::fs::remove_file(out.join(f)).unwrap();
+    }
+    let resumed = train_scene(request(true)).unwrap();
+    assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
+}
+
+#[test]
 fn the_probe_scores_exact_cameras_below_perturbed_ones() {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("scene");
