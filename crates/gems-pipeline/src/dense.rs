@@ -255,17 +255,22 @@ mod tests {
     use super::*;
     use gems_math::Vector6;
 
-    /// The plane z = 5 seen by cameras along x looking down +z; `depth_scale` distorts one
-    /// view's rendered depth as a first pass's own scene scale would.
-    fn plane_view(x: f64, depth_scale: f64, floater: bool) -> DepthView {
-        let k = Intrinsics {
+    /// The 40×30 camera every test view uses.
+    fn test_camera() -> Intrinsics {
+        Intrinsics {
             fx: 40.0,
             fy: 40.0,
             cx: 20.0,
             cy: 15.0,
             width: 40,
             height: 30,
-        };
+        }
+    }
+
+    /// The plane z = 5 seen by cameras along x looking down +z; `depth_scale` distorts one
+    /// view's rendered depth as a first pass's own scene scale would.
+    fn plane_view(x: f64, depth_scale: f64, floater: bool) -> DepthView {
+        let k = test_camera();
         let c2w = Se3::exp(&Vector6::new(x, 0.0, 0.0, 0.0, 0.0, 0.0));
         let n = 40 * 30;
         let mut depth = vec![(5.0 / depth_scale) as f32; n];
@@ -355,14 +360,7 @@ mod tests {
                 g.push(mean, quat, [disc, disc, thin], 8.0, sh);
             }
         }
-        let k = Intrinsics {
-            fx: 40.0,
-            fy: 40.0,
-            cx: 20.0,
-            cy: 15.0,
-            width: 40,
-            height: 30,
-        };
+        let k = test_camera();
         let cameras: Vec<(Intrinsics, Se3, Se3)> = [-0.3, -0.1, 0.1, 0.3]
             .iter()
             .map(|&x| {
