@@ -15,7 +15,9 @@
 //!   scene in one call (all of one size) and remembers what [`Renderer::backward`] needs;
 //!   `backward` turns `dL/dRGB` (and optionally `dL/dalpha`) into [`Gradients`] for every
 //!   Gaussian parameter, every background and every camera's rotation and translation, plus
-//!   densification statistics. Buffers are reused across calls.
+//!   densification statistics. Buffers are reused across calls. After a forward,
+//!   [`Renderer::surface_depth`] gives each pixel's surface depth (where its ray meets the
+//!   Gaussian that halves its transmittance), for geometry rather than training.
 //! * [`reference`] — a slow, dense, f64 renderer with the same semantics; the fast path and
 //!   the gsplat test vectors are checked against it and it is checked by finite differences.
 //! * [`ply`] — Inria-layout PLY read/write (opens in common splat viewers).
@@ -38,9 +40,11 @@ mod project;
 mod raster;
 pub mod reference;
 pub mod sh;
+mod surface;
 
 pub use png::write_png;
 pub use raster::Renderer;
+pub use surface::SURFACE_TRANSMITTANCE;
 
 use gems_math::{Intrinsics, Se3};
 

@@ -330,6 +330,81 @@ impl Renderer {
         })
     }
 
+    /// Surface depth `[C,H,W]` of the last forward's images ([`crate::surface`]): at each
+    /// pixel, the ray depth of the Gaussian that brings the transmittance to one half or below,
+    /// 0 where it stays above. `g` and `cams` must be the last forward's. One pixel at a time
+    /// (no lanes): it serves geometry, once per view, not the training loop.
+    pub fn surface_depth(&self, g: &Gaussians, cams: &[Camera]) -> Result<Vec<f32>, SplatError> {
+        let (width, height) = check_inputs(g, cams, &vec![[0.0; 3]; cams.len()])?;
+        let sv = &self.saved;
+        let s = match sv.settings {
+            Some(s) if sv.valid => s,
+            _ => return Err(SplatError::NoForward("no successful forward call".into())),
+        };
+        crate::check_same_batch(
+            crate::BatchShape {
+                gaussians: sv.num_gaussians,
+                cameras: sv.num_cameras,
+                width: sv.width,
+                height: sv.height,
+            },
+            crate::BatchShape {
+                gaussians: g.len(),
+                cameras: cams.len(),
+                width: width as usize,
+                height: height as usize,
+            },
+        )?;
+        let (w, h, tiles_x) = (sv.width, sv.height, sv.tiles_x);
+        let (amin, amax, tmin) = (s.alpha_min, s.alpha_max, s.transmittance_min);
+        let mut depth = vec![0.0f32; cams.len() * h * w];
+        for (c, image) in depth.chunks_mut(h * w).enumerate() {
+            let cam = Cam::new(&cams[c]);
+            let b = &self.bins[c];
+            let rays: Vec<Option<crate::surface::RayDepth>> = b
+                .gid
+                .par_iter()
+                .map(|&i| crate::surface::RayDepth::new(g, i as usize, &cam))
+                .collect();
+            image.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+                let py = y as f32 + 0.5;
+                for (x, out) in row.iter_mut().enumerate() {
+                    let px = x as f32 + 0.5;
+                    let tile = (y / TILE) * tiles_x + x / TILE;
+                    let list = b.offsets[tile] as usize..b.offsets[tile + 1] as usize;
+                    let mut t = 1.0f32;
+                    for k in list {
+                        let sp = &b.packed[k];
+                        let [x0, x1, y0, y1] = sp.pbox;
+                        let (xi, yi) = (x as i32, y as i32);
+                        if xi < x0 || xi > x1 || yi < y0 || yi > y1 {
+                            continue;
+                        }
+                        let (dx, dy) = (sp.x - px, sp.y - py);
+                        let [ca, cb, cc] = sp.conic;
+                        let sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
+                        let alpha = (sp.opacity * exp_neg(-sigma)).min(amax);
+                        if sigma < 0.0 || alpha < amin {
+                            continue;
+                        }
+                        let next_t = t * (1.0 - alpha);
+                        if next_t <= tmin {
+                            break;
+                        }
+                        if f64::from(next_t) <= crate::surface::SURFACE_TRANSMITTANCE {
+                            if let Some(ray) = &rays[b.ids[k] as usize] {
+                                *out = ray.at(&cam, f64::from(px), f64::from(py)) as f32;
+                            }
+                            break;
+                        }
+                        t = next_t;
+                    }
+                }
+            });
+        }
+        Ok(depth)
+    }
+
     /// Backward of the LAST forward call (same g/cams/backgrounds). d_rgb [C,H,W,3], d_alpha [C,H,W] or None.
     pub fn backward(
         &mut self,

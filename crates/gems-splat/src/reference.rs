@@ -7,6 +7,7 @@
 //! tests and small scenes only: it costs O(C·H·W·N).
 
 use crate::project::{self, Cam, GradSlices, Prep, Proj, ProjGrad};
+use crate::surface::{RayDepth, SURFACE_TRANSMITTANCE};
 use crate::{Camera, Gaussians, RenderSettings, SplatError, check_inputs};
 
 /// Output of [`forward`], in f64.
@@ -198,6 +199,37 @@ pub fn forward(
                 }
                 out.alpha[k] = 1.0 - t;
                 out.depth[k] = if t < 1.0 { d / (1.0 - t) } else { 0.0 };
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Surface depth `[C,H,W]` ([`crate::surface`]): at each pixel, the ray depth of the Gaussian
+/// that brings the transmittance to one half or below; 0 where it stays above.
+pub fn surface_depth(
+    g: &Gaussians,
+    cams: &[Camera],
+    s: &RenderSettings,
+) -> Result<Vec<f64>, SplatError> {
+    let scene = build(g, cams, &vec![[0.0; 3]; cams.len()], s)?;
+    let (w, h) = (scene.width, scene.height);
+    let mut out = vec![0.0; cams.len() * h * w];
+    let mut contributions = Vec::new();
+    for c in 0..cams.len() {
+        for y in 0..h {
+            for x in 0..w {
+                let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+                contributions.clear();
+                composite(&scene, c, px, py, s, Some(&mut contributions));
+                let crossing = contributions
+                    .iter()
+                    .find(|k| k.t * (1.0 - k.alpha) <= SURFACE_TRANSMITTANCE);
+                if let Some(k) = crossing
+                    && let Some(ray) = RayDepth::new(g, k.i, &scene.cams[c])
+                {
+                    out[(c * h + y) * w + x] = ray.at(&scene.cams[c], px, py);
+                }
             }
         }
     }
