@@ -7,23 +7,24 @@
 //! exact surface points the
 //! same cameras train 1.7 dB better (BENCHMARKS.md, "Is depth the missing part? An oracle"),
 //! and denser SfM tracks do not give that. The first pass's Gaussians render a depth for every
-//! pixel: each view's depth map, rendered at its trained midpoint, is aligned to the first
-//! model's sparse depths in that view (one scale per view, the median ratio: the first pass's
-//! scene is its own, and depth is useful only in the cameras' frame, as the oracle showed),
-//! back-projected from the model's camera, and a pixel's point is kept only where the aligned
-//! depths of at least [`MIN_AGREEING_VIEWS`] other views agree with it (a floater or a depth
-//! averaged across an edge is seen by no other view at that depth).
+//! pixel: each view's surface-depth map (`gems_splat::Renderer::surface_depth`: where the
+//! pixel's ray meets the Gaussian that halves its transmittance), rendered at its trained
+//! midpoint, is aligned to the first model's sparse depths in that view (one scale per view,
+//! the median ratio: the first pass's scene is its own, and depth is useful only in the
+//! cameras' frame, as the oracle showed), back-projected from the model's camera, and a
+//! pixel's point is kept only where the aligned depths of at least [`MIN_AGREEING_VIEWS`]
+//! other views agree with it (a floater or a depth averaged across an edge is seen by no other
+//! view at that depth).
 //!
-//! What limits it: expected depth, the opacity-weighted mean of the Gaussians' centre depths
-//! composited front to back, lies in front of a slanted surface (the test below measures it),
-//! and one scale per view undoes only its mean. On a generated scene the fused points lie a
-//! median 2.8 % of their depth from the true surface, the SfM's own 0.7 % (BENCHMARKS.md,
-//! "Dense points from the first pass's depth maps").
+//! Why surface depth: expected depth, the opacity-weighted mean of the Gaussians' centre
+//! depths composited front to back, lies up to 3 % in front of a slanted surface (the test
+//! below); surface depth lies within 0.2 %. Depths are read between pixel centres
+//! bilinearly, for the same reason: on a slanted surface the depth changes across a pixel by
+//! more than the agreement's tolerance.
 
 use gems_data::colmap::{Point3D, SparseModel};
-use gems_gpu::Engine;
 use gems_math::{Intrinsics, Se3, Vector3};
-use gems_splat::{Camera, Gaussians, RenderSettings};
+use gems_splat::{Camera, Gaussians, RenderSettings, Renderer};
 use gems_train::TrainOutput;
 
 use crate::PipelineError;
@@ -50,7 +51,7 @@ pub struct DepthView {
     pub rgb: Vec<f32>,
     /// `[H,W]` rendered opacity `1 − T`.
     pub alpha: Vec<f32>,
-    /// `[H,W]` rendered expected depth (camera z).
+    /// `[H,W]` rendered surface depth (camera z; 0 where nothing is drawn).
     pub depth: Vec<f32>,
 }
 
@@ -62,17 +63,16 @@ impl DepthView {
         )
     }
 
-    /// Camera-frame point of world point `p`, and its pixel when it is in front and inside.
-    fn pixel_of(&self, p: &Vector3<f64>) -> (Vector3<f64>, Option<usize>) {
+    /// Camera-frame point of world point `p`, and the rendered depth where it projects when
+    /// it is in front and the render is opaque there ([`Self::depth_near`]).
+    fn depth_seen(&self, p: &Vector3<f64>) -> (Vector3<f64>, Option<f64>) {
         let c = self.w2c.rot * p + self.w2c.trans;
         if c.z <= 0.0 {
             return (c, None);
         }
         let k = &self.intrinsics;
         let (u, v) = (k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy);
-        let (w, h) = self.size();
-        let inside = u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64;
-        (c, inside.then(|| v as usize * w + u as usize))
+        (c, self.depth_near(u, v))
     }
 
     /// The rendered depth at a pixel when the render is opaque there.
@@ -81,14 +81,40 @@ impl DepthView {
         (self.alpha[pixel] >= MIN_ALPHA && d.is_finite() && d > 0.0).then_some(f64::from(d))
     }
 
+    /// The rendered depth at image point `(u, v)` (a pixel's centre at `x + 0.5`), interpolated
+    /// bilinearly between the four nearest pixel centres when all four are opaque: on a slanted
+    /// surface the depth changes across one pixel by more than [`DEPTH_TOLERANCE`], so the
+    /// nearest pixel's depth would misjudge both the alignment and the agreement.
+    fn depth_near(&self, u: f64, v: f64) -> Option<f64> {
+        let (w, h) = self.size();
+        if !(u >= 0.0 && v >= 0.0 && u <= w as f64 && v <= h as f64) {
+            return None;
+        }
+        let (x, y) = (
+            (u - 0.5).clamp(0.0, (w - 1) as f64),
+            (v - 0.5).clamp(0.0, (h - 1) as f64),
+        );
+        let (x0, y0) = (
+            (x as usize).min(w.saturating_sub(2)),
+            (y as usize).min(h.saturating_sub(2)),
+        );
+        let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+        let (ax, ay) = (x - x0 as f64, y - y0 as f64);
+        let d00 = self.depth_at(y0 * w + x0)?;
+        let d10 = self.depth_at(y0 * w + x1)?;
+        let d01 = self.depth_at(y1 * w + x0)?;
+        let d11 = self.depth_at(y1 * w + x1)?;
+        Some((1.0 - ay) * ((1.0 - ax) * d00 + ax * d10) + ay * ((1.0 - ax) * d01 + ax * d11))
+    }
+
     /// The factor that brings the rendered depths onto `sparse`'s: the median over the sparse
     /// points seen at an opaque pixel of (their depth / the rendered one).
     fn alignment(&self, sparse: &[Vector3<f64>]) -> Option<f64> {
         let mut ratios: Vec<f64> = sparse
             .iter()
             .filter_map(|p| {
-                let (c, pixel) = self.pixel_of(p);
-                Some(c.z / self.depth_at(pixel?)?)
+                let (c, d) = self.depth_seen(p);
+                Some(c.z / d?)
             })
             .collect();
         if ratios.len() < MIN_ALIGNMENT_POINTS {
@@ -158,9 +184,8 @@ pub fn fuse_depth_maps(
                         let Some(s) = s.filter(|_| j != i) else {
                             return false;
                         };
-                        let (c, at) = other.pixel_of(&xyz);
-                        at.and_then(|at| other.depth_at(at))
-                            .is_some_and(|d| (c.z - s * d).abs() <= DEPTH_TOLERANCE * c.z)
+                        let (c, d) = other.depth_seen(&xyz);
+                        d.is_some_and(|d| (c.z - s * d).abs() <= DEPTH_TOLERANCE * c.z)
                     })
                     .count();
                 if agreeing >= MIN_AGREEING_VIEWS {
@@ -182,27 +207,26 @@ pub fn fuse_depth_maps(
     kept
 }
 
-/// Renders `gaussians` with depth from each `(intrinsics, render_c2w, attach_c2w)`: the maps
-/// made at `render_c2w` (where the Gaussians were trained to be seen from), attached to the
-/// camera `attach_c2w` the points will belong to.
+/// Renders `gaussians` from each `(intrinsics, render_c2w, attach_c2w)` with surface depth
+/// (`gems_splat::Renderer::surface_depth`): the maps made at `render_c2w` (where the Gaussians
+/// were trained to be seen from), attached to the camera `attach_c2w` the points will belong
+/// to. On the CPU renderer whatever the training engine: surface depth is a CPU-only, forward-only
+/// pass, and a few dozen views cost seconds.
 pub fn render_depth_views(
-    engine: &mut Engine,
     gaussians: &Gaussians,
     cameras: &[(Intrinsics, Se3, Se3)],
 ) -> Result<Vec<DepthView>, PipelineError> {
-    let settings = RenderSettings {
-        compute_depth: true,
-        ..RenderSettings::default()
-    };
+    let settings = RenderSettings::default();
+    let mut renderer = Renderer::new();
     cameras
         .iter()
         .map(|(k, render_c2w, attach_c2w)| {
-            let cam = Camera::from_c2w(k, render_c2w);
-            let out = engine.forward(gaussians, &[cam], &[[0.0; 3]], &settings)?;
+            let cam = [Camera::from_c2w(k, render_c2w)];
+            let out = renderer.forward(gaussians, &cam, &[[0.0; 3]], &settings)?;
             Ok(DepthView {
                 w2c: attach_c2w.inverse(),
                 intrinsics: *k,
-                depth: out.depth.unwrap_or_else(|| vec![0.0; out.alpha.len()]),
+                depth: renderer.surface_depth(gaussians, &cam)?,
                 rgb: out.rgb,
                 alpha: out.alpha,
             })
@@ -215,7 +239,6 @@ pub fn render_depth_views(
 /// the maps, attached to the view's initial (the model's) camera, into up to `target` points
 /// beside the model's own. Returns the model and how many points it gained.
 pub fn with_dense_points(
-    engine: &mut Engine,
     first: &TrainOutput,
     model: &SparseModel,
     target: usize,
@@ -226,7 +249,7 @@ pub fn with_dense_points(
         .iter()
         .map(|v| (v.intrinsics, Se3::from(&v.mid_c2w), Se3::from(&v.c2w_init)))
         .collect();
-    let views = render_depth_views(engine, &first.gaussians, &cameras)?;
+    let views = render_depth_views(&first.gaussians, &cameras)?;
     let sparse: Vec<Vector3<f64>> = model
         .points
         .iter()
@@ -368,7 +391,7 @@ mod tests {
                 (k, c2w, c2w)
             })
             .collect();
-        let views = render_depth_views(&mut Engine::cpu(), &g, &cameras).unwrap();
+        let views = render_depth_views(&g, &cameras).unwrap();
         let sparse: Vec<Vector3<f64>> = (0..40)
             .map(|i| {
                 let (x, y) = (
@@ -385,20 +408,19 @@ mod tests {
 
     #[test]
     fn the_renderers_depth_maps_of_a_surface_fuse_onto_it() {
-        // The plane's slant makes the depth change by about 0.12 a pixel. Expected depth (of
-        // the Gaussians' means, composited front to back) lies a little in front of a slanted
-        // surface and the alignment's one scale per view cannot undo all of it: within 3 % of
-        // the depth. That bias does not depend on the slant's sign, whereas a pixel-centre
-        // convention differing between the renderer and the back-projection would shift the
-        // two mirrored planes' points in opposite directions.
+        // The plane's slant makes the depth change by about 0.12 a pixel. Surface depth follows
+        // it: the points lie within 0.2 % of their depth (expected depth, the Gaussians'
+        // composited centre depths, put them up to 3 % in front). A pixel-centre convention
+        // differing between the renderer and the back-projection would shift the two mirrored
+        // planes' points in opposite directions, by about 0.06.
         let (rising, falling) = (fused_slanted_plane(1.0), fused_slanted_plane(-1.0));
         let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len() as f64;
         for errors in [&rising, &falling] {
             let worst = errors.iter().fold(0.0f64, |w, e| w.max(e.abs()));
-            assert!(worst < 0.15, "a point {worst} off the plane");
+            assert!(worst < 0.01, "a point {worst} off the plane");
         }
         let (a, b) = (mean(&rising), mean(&falling));
-        assert!((a - b).abs() < 0.005, "mean errors {a} and {b}");
+        assert!((a - b).abs() < 0.002, "mean errors {a} and {b}");
     }
 
     #[test]

@@ -341,7 +341,6 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         {
             let dense = rerun.join("dense").join("sparse").join("0");
             let added = add_dense_points(
-                &mut engine,
                 &req.output.join("first_pass"),
                 first_model,
                 &dense,
@@ -379,7 +378,6 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
 /// all, and returns how many it added; a resumed run reuses the model an earlier one wrote
 /// (`None`).
 fn add_dense_points(
-    engine: &mut Engine,
     first_pass: &Path,
     first_model: &Path,
     dense: &Path,
@@ -396,7 +394,7 @@ fn add_dense_points(
         .min_points
         .min(cfg.mcmc.cap_max)
         .saturating_sub(model.points.len());
-    let (with_dense, added) = dense::with_dense_points(engine, &first, &model, target)?;
+    let (with_dense, added) = dense::with_dense_points(&first, &model, target)?;
     gems_data::colmap::write_model(dense, &with_dense, gems_data::colmap::ModelFormat::Binary)?;
     tracing::info!(
         added,
