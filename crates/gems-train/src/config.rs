@@ -339,15 +339,14 @@ pub struct InitConfig {
     pub confirmed_hold_midpoint: bool,
     /// The run proper from a confirmed first model starts from that model's points and dense
     /// points from the first pass's depth maps (gems-pipeline's `dense` module: each training
-    /// view's depth rendered at its trained midpoint, aligned to the model's sparse depths,
-    /// back-projected from the confirmed camera, kept where two other views agree), up to
-    /// `min_points` in all, instead of the sparse points topped up at random. The model with
+    /// view's surface depth rendered at its trained midpoint, aligned to the model's sparse
+    /// depths, back-projected from the confirmed camera, kept where two other views agree), up
+    /// to `min_points` in all, instead of the sparse points topped up at random. The model with
     /// them is `sfm_rerun/dense/sparse/0`. Default false: from the imported sharp-frame SfM
-    /// model of the held-out seed 7 (3000 steps) +0.27 dB at the trajectory midpoint, +0.33 dB
-    /// refined deblurring and +0.16 dB refined novel views, within what one training seed
-    /// spreads, on one scene; the fused points lie a median 2.8 % of their depth from the
-    /// surface against 0.7 % for the SfM's (BENCHMARKS.md, "Dense points from the first pass's
-    /// depth maps").
+    /// model of the held-out seed 7 (3000 steps, midpoints held) +0.4 dB refined deblurring and
+    /// +0.3 dB refined novel views, where the generator's exact surface points give +1.65 dB;
+    /// the fused points lie a median 1.9 % of their depth from the surface (BENCHMARKS.md,
+    /// "Surface depth for the dense points").
     pub confirmed_dense_points: bool,
     /// σ, as a fraction of the focal, of the prior under which the built-in SfM refines a focal
     /// read from the photos' EXIF (gems-pipeline; `gems_init::sfm::EXIF_FOCAL_PRIOR`, whose value
