@@ -345,8 +345,8 @@ pub struct InitConfig {
     /// them is `sfm_rerun/dense/sparse/0`. Default false: from the imported sharp-frame SfM
     /// model of the held-out seed 7 (3000 steps, midpoints held) +0.4 dB refined deblurring and
     /// +0.3 dB refined novel views, where the generator's exact surface points give +1.65 dB;
-    /// the fused points lie a median 1.9 % of their depth from the surface (BENCHMARKS.md,
-    /// "Surface depth for the dense points").
+    /// on seed 8 (its choice confirmed by hand) +1.6 dB refined deblurring. Two seeds so far
+    /// (BENCHMARKS.md, "Surface depth for the dense points").
     pub confirmed_dense_points: bool,
     /// σ, as a fraction of the focal, of the prior under which the built-in SfM refines a focal
     /// read from the photos' EXIF (gems-pipeline; `gems_init::sfm::EXIF_FOCAL_PRIOR`, whose value
