@@ -330,12 +330,15 @@ impl Renderer {
         })
     }
 
-    /// Surface depth `[C,H,W]` of the last forward's images ([`crate::surface`]): at each
-    /// pixel, the ray depth of the Gaussian that brings the transmittance to one half or below,
-    /// 0 where it stays above. `g` and `cams` must be the last forward's. One pixel at a time
-    /// (no lanes): it serves geometry, once per view, not the training loop.
-    pub fn surface_depth(&self, g: &Gaussians, cams: &[Camera]) -> Result<Vec<f32>, SplatError> {
-        let (width, height) = check_inputs(g, cams, &vec![[0.0; 3]; cams.len()])?;
+    /// The last forward's settings, when it succeeded and rendered this batch (same number of
+    /// Gaussians and cameras, same image size).
+    fn last_forward(
+        &self,
+        g: &Gaussians,
+        cams: &[Camera],
+        backgrounds: &[[f32; 3]],
+    ) -> Result<RenderSettings, SplatError> {
+        let (width, height) = check_inputs(g, cams, backgrounds)?;
         let sv = &self.saved;
         let s = match sv.settings {
             Some(s) if sv.valid => s,
@@ -355,6 +358,16 @@ impl Renderer {
                 height: height as usize,
             },
         )?;
+        Ok(s)
+    }
+
+    /// Surface depth `[C,H,W]` of the last forward's images ([`crate::surface`]): at each
+    /// pixel, the ray depth of the Gaussian that brings the transmittance to one half or below,
+    /// 0 where it stays above. `g` and `cams` must be the last forward's. One pixel at a time
+    /// (no lanes): it serves geometry, once per view, not the training loop.
+    pub fn surface_depth(&self, g: &Gaussians, cams: &[Camera]) -> Result<Vec<f32>, SplatError> {
+        let s = self.last_forward(g, cams, &vec![[0.0; 3]; cams.len()])?;
+        let sv = &self.saved;
         let (w, h, tiles_x) = (sv.width, sv.height, sv.tiles_x);
         let (amin, amax, tmin) = (s.alpha_min, s.alpha_max, s.transmittance_min);
         let mut depth = vec![0.0f32; cams.len() * h * w];
@@ -414,26 +427,8 @@ impl Renderer {
         d_rgb: &[f32],
         d_alpha: Option<&[f32]>,
     ) -> Result<Gradients, SplatError> {
-        let (width, height) = check_inputs(g, cams, backgrounds)?;
+        let s = self.last_forward(g, cams, backgrounds)?;
         let sv = &self.saved;
-        let s = match sv.settings {
-            Some(s) if sv.valid => s,
-            _ => return Err(SplatError::NoForward("no successful forward call".into())),
-        };
-        crate::check_same_batch(
-            crate::BatchShape {
-                gaussians: sv.num_gaussians,
-                cameras: sv.num_cameras,
-                width: sv.width,
-                height: sv.height,
-            },
-            crate::BatchShape {
-                gaussians: g.len(),
-                cameras: cams.len(),
-                width: width as usize,
-                height: height as usize,
-            },
-        )?;
         let (n, nc, w, h) = (sv.num_gaussians, sv.num_cameras, sv.width, sv.height);
         let (tiles_x, tiles_y) = (sv.tiles_x, sv.tiles_y);
         let tiles = tiles_x * tiles_y;
