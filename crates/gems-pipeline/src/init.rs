@@ -109,6 +109,7 @@ pub fn resolve_init(
             seed,
             req.focal_px,
             req.focal_prior,
+            None,
         )?)),
         Init::ColmapCli => InitMode::Colmap(Some(run_colmap(
             &init_images(scene, output, req)?,
@@ -184,6 +185,18 @@ pub fn rerun_init_on_renders(
             .and_then(|p| gems_data::image::image_dimensions(p).ok())
     };
     let renders = gems_eval::render_mid_exposure(engine, first, &sizes)?;
+    // A render has no motion blur; it is as sharp as one pixel of the size the first pass
+    // trained at, which is that many pixels of the photo's size. The estimate from the renders'
+    // edges reads their softness as blur and can put the SfM on too coarse a level
+    // ([`gems_init::sfm::SfmOptions::blur_px`]).
+    let blur_px = first
+        .views
+        .iter()
+        .find_map(|v| {
+            let (w, _) = sizes(&v.name)?;
+            Some(f64::from(w) / f64::from(v.intrinsics.width))
+        })
+        .map(|ratio| ratio.max(1.0));
     // The renders are made with the focal the first pass learned (`pose.focal_lr`) or, from an
     // imported model, that model's own: the SfM on them starts from it, at the photos' size,
     // under the prior `learned_focal_prior` (0 holds it), instead of searching for one again.
@@ -249,7 +262,7 @@ pub fn rerun_init_on_renders(
     let model = match req.init {
         Init::ColmapCli => run_colmap(out, out, &req.colmap_binary, focal_px)?,
         Init::Sfm | Init::Colmap | Init::Gt | Init::GtNoisy => {
-            run_sfm(out, out, seed, focal_px, focal_prior)?
+            run_sfm(out, out, seed, focal_px, focal_prior, blur_px)?
         }
     };
     if renamed.iter().any(|(written, name)| written != name) {
@@ -312,19 +325,22 @@ pub fn edi_images(scene: &Path, output: &Path, ev: &EventInit) -> Result<PathBuf
 /// Runs the built-in SfM on `images` (a scene folder or an image folder), writes its outputs to
 /// `out` and returns the COLMAP model folder. `focal_px` fixes a known focal (calibrated camera),
 /// or with `focal_prior` (σ over the focal) is refined under that prior (a focal from EXIF).
-/// Views it could not register are reported by name.
+/// `blur_px` is the images' motion blur when it is known ([`gems_init::sfm::SfmOptions::blur_px`];
+/// `None` estimates it). Views it could not register are reported by name.
 pub fn run_sfm(
     images: &Path,
     out: &Path,
     seed: u64,
     focal_px: Option<f64>,
     focal_prior: Option<f64>,
+    blur_px: Option<f64>,
 ) -> Result<PathBuf, PipelineError> {
     let imgs = gems_init::sfm::load_images(images)?;
     let opts = gems_init::sfm::SfmOptions {
         seed,
         focal_px,
         focal_prior,
+        blur_px,
         ..Default::default()
     };
     tracing::info!(images = imgs.len(), "structure from motion");

@@ -382,8 +382,9 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
 fn an_imported_model_is_checked_on_the_renders_and_held_only_when_confirmed() {
     let (dir, scene) = tiny_scene();
     // The imported model: the built-in SfM's, written where a user's COLMAP model would be.
-    let imported = gems_pipeline::run_sfm(&scene, &dir.path().join("imported"), 5, None, None)
-        .expect("the SfM registers the tiny scene");
+    let imported =
+        gems_pipeline::run_sfm(&scene, &dir.path().join("imported"), 5, None, None, None)
+            .expect("the SfM registers the tiny scene");
     let run = |name: &str, confirm_pct: f64| {
         let out = dir.path().join(name);
         let init = InitRequest {
@@ -469,8 +470,9 @@ fn an_imported_model_is_checked_on_the_renders_and_held_only_when_confirmed() {
 #[test]
 fn a_confirmed_model_starts_from_dense_points_when_asked() {
     let (dir, scene) = tiny_scene();
-    let imported = gems_pipeline::run_sfm(&scene, &dir.path().join("imported"), 5, None, None)
-        .expect("the SfM registers the tiny scene");
+    let imported =
+        gems_pipeline::run_sfm(&scene, &dir.path().join("imported"), 5, None, None, None)
+            .expect("the SfM registers the tiny scene");
     let out = dir.path().join("dense");
     let request = |resume: bool| {
         let init = InitRequest {

@@ -212,7 +212,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         const SHARP_SFM: &str = "GeMS, built-in SfM on the sharp frames";
         let gems_sharp_sfm = wants(RowKind::SharpSfm)
             .then(|| {
-                match gems_pipeline::run_sfm(&sharp, &dir.join("sharp_sfm"), seed, focal, None) {
+                match gems_pipeline::run_sfm(
+                    &sharp,
+                    &dir.join("sharp_sfm"),
+                    seed,
+                    focal,
+                    None,
+                    None,
+                ) {
                     Ok(model) => row(
                         SHARP_SFM,
                         gems_pipeline::InitRequest {

@@ -114,7 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             tracing::info!("2/3 structure from motion on the blurry images");
             scene.clone()
         };
-        match gems_pipeline::run_sfm(&sfm_images, &out.join("sfm"), args.seed, focal, None) {
+        match gems_pipeline::run_sfm(&sfm_images, &out.join("sfm"), args.seed, focal, None, None) {
             Ok(model) => InitMode::Colmap(Some(model)),
             Err(e) => {
                 tracing::warn!(

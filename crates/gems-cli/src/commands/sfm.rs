@@ -35,6 +35,11 @@ pub struct Args {
     /// (`gems_init::sfm::EXIF_FOCAL_PRIOR`), held for one given with `--focal` (0 holds either).
     #[arg(long)]
     pub focal_prior: Option<f64>,
+    /// The photos' motion blur in pixels when it is known (0: sharp), in place of the estimate
+    /// from their edges, which soft but unblurred images (renders, out-of-focus shots) read as
+    /// blur: it sets the working level, coarse to fine and the matching patches.
+    #[arg(long)]
+    pub blur_px: Option<f64>,
     /// Long side (px) of the pyramid levels to try (default: 384,256,192,128,96,64), nearest first to
     /// the level where the estimated motion blur is about 10 px.
     #[arg(long, value_delimiter = ',')]
@@ -143,6 +148,7 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
             CaptureOrderArg::Ordered => CaptureOrder::Ordered,
             CaptureOrderArg::Unordered => CaptureOrder::Unordered,
         },
+        blur_px: args.blur_px,
         seed: args.seed,
         ..SfmOptions::default()
     };

@@ -88,6 +88,16 @@ pub struct SfmOptions {
     /// reconstruction is made with the focal held fixed, then a final bundle adjustment refines
     /// it under a Gaussian prior of that width. `None` keeps it fixed (a calibrated camera).
     pub focal_prior: Option<f64>,
+    /// The images' motion-blur length in full-size pixels when it is known, in place of the
+    /// estimate from the images' edges ([`estimate_blur_px`]) wherever the blur decides
+    /// something: the working levels, coarse to fine, patch sizes, affine matching, trimming.
+    /// Renders of a trained scene have no motion blur, yet their softness reads as blur: on a
+    /// first pass's renders at 30 px of true blur the estimate said 20 px, the model was made
+    /// at 96 px instead of 200 and its cameras came out 3.1 % of the path extent from the
+    /// cameras the renders were made at, 0.4 % told 1 px (crates/gems-init/BENCHMARKS.md, "A
+    /// known blur for soft, unblurred images"). `None` estimates it; the report's per-photo
+    /// figures are the estimates either way.
+    pub blur_px: Option<f64>,
     /// Candidate focal lengths as multiples of the long image side, used when `focal_px` is None.
     /// When the chosen one is the first or the last, candidates are added beyond it, in the
     /// list's own ratio at that end, while the added one is chosen, within
@@ -204,6 +214,7 @@ impl Default for SfmOptions {
         SfmOptions {
             focal_px: None,
             focal_prior: None,
+            blur_px: None,
             focal_candidates: vec![0.6, 0.75, 0.9, 1.1, 1.35, 1.7],
             focal_search_span: (0.3, 4.0),
             // 256 and 384 for photos that are large and not very blurred: Deblur-NeRF's
@@ -758,9 +769,11 @@ fn working_sizes_by_blur(
     opts: &SfmOptions,
 ) -> (Vec<f32>, f64, Vec<u32>) {
     let blurs: Vec<f32> = grays.par_iter().map(features::estimate_blur_px).collect();
-    let mut sorted = blurs.clone();
-    sorted.sort_by(|a, b| a.total_cmp(b));
-    let blur = sorted[sorted.len() / 2] as f64;
+    let blur = opts.blur_px.unwrap_or_else(|| {
+        let mut sorted = blurs.clone();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        f64::from(sorted[sorted.len() / 2])
+    });
     let target_ws = if blur > 0.0 {
         long * TARGET_BLUR_PX / blur
     } else {
@@ -976,6 +989,11 @@ fn validate(images: &[SfmImage], opts: &SfmOptions) -> Result<(), SfmError> {
     {
         return Err(SfmError::InvalidOption(
             "focal candidates must be positive and non-empty".into(),
+        ));
+    }
+    if opts.blur_px.is_some_and(|b| !(b.is_finite() && b >= 0.0)) {
+        return Err(SfmError::InvalidOption(
+            "the known blur must be finite and >= 0 px".into(),
         ));
     }
     let (lo, hi) = opts.focal_search_span;
