@@ -342,11 +342,12 @@ pub struct InitConfig {
     /// view's surface depth rendered at its trained midpoint, aligned to the model's sparse
     /// depths, back-projected from the confirmed camera, kept where two other views agree), up
     /// to `min_points` in all, instead of the sparse points topped up at random. The model with
-    /// them is `sfm_rerun/dense/sparse/0`. Default false: from the imported sharp-frame SfM
+    /// them is `sfm_rerun/dense/sparse/0`. Default true: from the imported sharp-frame SfM
     /// model of the held-out seed 7 (3000 steps, midpoints held) +0.4 dB refined deblurring and
     /// +0.3 dB refined novel views, where the generator's exact surface points give +1.65 dB;
-    /// on seed 8 (its choice confirmed by hand) +1.6 dB refined deblurring. Two seeds so far
-    /// (BENCHMARKS.md, "Surface depth for the dense points").
+    /// on seeds 8 and 9 (their choices confirmed by hand) +1.6 and +0.3 dB refined deblurring,
+    /// +1.45 and +0.1 dB refined novel views (BENCHMARKS.md, "Surface depth for the dense
+    /// points", "A third seed for the dense points"). false: the sparse points topped up.
     pub confirmed_dense_points: bool,
     /// σ, as a fraction of the focal, of the prior under which the built-in SfM refines a focal
     /// read from the photos' EXIF (gems-pipeline; `gems_init::sfm::EXIF_FOCAL_PRIOR`, whose value
@@ -385,7 +386,7 @@ impl Default for InitConfig {
             accurate_poses_straight_fraction: 0.15,
             confirmed_anchor_weight: 100.0,
             confirmed_hold_midpoint: true,
-            confirmed_dense_points: false,
+            confirmed_dense_points: true,
             exif_focal_prior: 0.02,
         }
     }
