@@ -189,25 +189,19 @@ pub fn rerun_init_on_renders(
     // trained at, which is that many pixels of the photo's size. The estimate from the renders'
     // edges reads their softness as blur and can put the SfM on too coarse a level
     // ([`gems_init::sfm::SfmOptions::blur_px`]).
-    let blur_px = first
-        .views
-        .iter()
-        .find_map(|v| {
-            let (w, _) = sizes(&v.name)?;
-            Some(f64::from(w) / f64::from(v.intrinsics.width))
-        })
-        .map(|ratio| ratio.max(1.0));
+    // A trained view and the photo's size over the size it trained at.
+    let photo_scale = first.views.iter().find_map(|v| {
+        let (w, _) = sizes(&v.name)?;
+        Some((v, f64::from(w) / f64::from(v.intrinsics.width)))
+    });
+    let blur_px = photo_scale.map(|(_, ratio)| ratio.max(1.0));
     // The renders are made with the focal the first pass learned (`pose.focal_lr`) or, from an
     // imported model, that model's own: the SfM on them starts from it, at the photos' size,
     // under the prior `learned_focal_prior` (0 holds it), instead of searching for one again.
     let learned = (first.focal_factor != 1.0 || req.init == Init::Colmap)
-        .then(|| {
-            first.views.iter().find_map(|v| {
-                let (w, _) = sizes(&v.name)?;
-                Some(v.intrinsics.fx * f64::from(w) / f64::from(v.intrinsics.width))
-            })
-        })
-        .flatten();
+        .then_some(photo_scale)
+        .flatten()
+        .map(|(v, ratio)| v.intrinsics.fx * ratio);
     let (focal_px, focal_prior) = match learned {
         Some(f) => {
             tracing::info!(

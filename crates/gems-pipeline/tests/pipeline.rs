@@ -283,18 +283,7 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
         (true, false)
     );
     let trained = gems_train::TrainOutput::load(&out).unwrap();
-    // From the first model, with the first pass's dense points (`init.confirmed_dense_points`),
-    // not from the renders' model.
-    assert!(
-        !trained.init_label.contains(&renders_model_dir()),
-        "{}",
-        trained.init_label
-    );
-    assert!(
-        trained.init_label.contains("dense"),
-        "{}",
-        trained.init_label
-    );
+    assert_trained_from_the_dense_model(&trained);
     assert!(trained.run.unwrap().init.contains("tried and not kept"));
 
     // The recorded change is the renders' model against the first model's cameras (the first
@@ -389,12 +378,17 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
     }
 }
 
-/// The renders' model's folder, as an init label names it.
-fn renders_model_dir() -> String {
-    std::path::Path::new("sfm_rerun")
-        .join("sparse")
-        .display()
-        .to_string()
+/// A confirmed first model's run proper trained from that model with the first pass's dense
+/// points (`init.confirmed_dense_points`, `sfm_rerun/dense/sparse/0`), not from the renders'
+/// model (`sfm_rerun/sparse/0`).
+fn assert_trained_from_the_dense_model(trained: &gems_train::TrainOutput) {
+    let renders_model = std::path::Path::new("sfm_rerun").join("sparse");
+    let label = &trained.init_label;
+    assert!(
+        !label.contains(&renders_model.display().to_string()),
+        "{label}"
+    );
+    assert!(label.contains("dense"), "{label}");
 }
 
 #[test]
@@ -434,16 +428,7 @@ fn an_imported_model_is_checked_on_the_renders_and_held_only_when_confirmed() {
         (20, cfg.init.accurate_poses_straight_fraction, true),
         "all the steps from the imported model, straight paths first, its cameras held"
     );
-    assert!(
-        !trained.init_label.contains(&renders_model_dir()),
-        "{}",
-        trained.init_label
-    );
-    assert!(
-        trained.init_label.contains("dense"),
-        "{}",
-        trained.init_label
-    );
+    assert_trained_from_the_dense_model(&trained);
     let run_init = trained.run.unwrap().init;
     assert!(
         run_init.contains("checked by the built-in SfM") && run_init.contains("confirms"),
