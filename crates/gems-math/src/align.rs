@@ -129,6 +129,14 @@ pub struct CameraDiscrepancy {
     pub centre_pct: f64,
     /// RMSE of the relative rotations, in degrees.
     pub rotation_deg: f64,
+    /// The share of the centres' difference that varies smoothly along the cameras' path, in
+    /// [0, 1]: after the centres' own best similarity ([`umeyama`], so that the orientations'
+    /// fit leaves no rotation of the path behind), the part of the squared differences a
+    /// quadratic in the position along the second set's principal axis explains, fitted per
+    /// coordinate. A bend or stretch of the path is systematic (near 1); each camera off on its
+    /// own puts about 3 / (number of cameras) here by chance. 0 with fewer than four cameras
+    /// or centres on one line.
+    pub systematic_share: f64,
 }
 
 /// The [`CameraDiscrepancy`] of the pairs `(in A, in B)` (camera-to-world poses): A carried onto
@@ -156,7 +164,74 @@ pub fn camera_discrepancy(pairs: &[(Se3, Se3)]) -> Option<CameraDiscrepancy> {
     Some(CameraDiscrepancy {
         centre_pct: 100.0 * (c / n).sqrt() / extent,
         rotation_deg: (r / n).sqrt(),
+        systematic_share: systematic_share(pairs),
     })
+}
+
+/// [`CameraDiscrepancy::systematic_share`] of the pairs `(in A, in B)`.
+fn systematic_share(pairs: &[(Se3, Se3)]) -> f64 {
+    let a: Vec<[f64; 3]> = pairs.iter().map(|(a, _)| a.trans.into()).collect();
+    let b: Vec<[f64; 3]> = pairs.iter().map(|(_, b)| b.trans.into()).collect();
+    let Ok(sim) = umeyama(&a, &b, true) else {
+        return 0.0;
+    };
+    let centres: Vec<Vector3<f64>> = b.iter().map(|&p| p.into()).collect();
+    let diffs: Vec<Vector3<f64>> = a
+        .iter()
+        .zip(&centres)
+        .map(|(p, q)| Vector3::from(sim.act(p)) - q)
+        .collect();
+    let total: f64 = diffs.iter().map(|d| d.norm_squared()).sum();
+    if total <= 0.0 {
+        return 0.0;
+    }
+    (smooth_part(&centres, &diffs) / total).clamp(0.0, 1.0)
+}
+
+/// The squared norm, summed over the cameras, of the least-squares fit of `values` (one per
+/// camera) by a quadratic in each camera's position along the principal axis of `centres`:
+/// what of the values changes smoothly along the path. 0 with fewer than four cameras, where a
+/// quadratic fits anything, or when the centres coincide.
+fn smooth_part(centres: &[Vector3<f64>], values: &[Vector3<f64>]) -> f64 {
+    let n = centres.len();
+    if n < 4 {
+        return 0.0;
+    }
+    let mean = centres.iter().sum::<Vector3<f64>>() / n as f64;
+    let cov = centres.iter().fold(Matrix3::zeros(), |acc, c| {
+        let d = c - mean;
+        acc + d * d.transpose()
+    });
+    let eig = cov.symmetric_eigen();
+    let axis = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
+    let along: Vec<f64> = centres.iter().map(|c| (c - mean).dot(&axis)).collect();
+    let half = along.iter().fold(0.0f64, |m, &t| m.max(t.abs()));
+    if half <= 0.0 {
+        return 0.0;
+    }
+    let basis: Vec<Vector3<f64>> = along
+        .iter()
+        .map(|&t| {
+            let t = t / half;
+            Vector3::new(1.0, t, t * t)
+        })
+        .collect();
+    let gram = basis
+        .iter()
+        .fold(Matrix3::zeros(), |acc, v| acc + v * v.transpose());
+    let Some(inv) = gram.try_inverse() else {
+        return 0.0;
+    };
+    // One right-hand side per coordinate: columns of Σ basis ⊗ value.
+    let rhs = basis
+        .iter()
+        .zip(values)
+        .fold(Matrix3::zeros(), |acc, (v, y)| acc + v * y.transpose());
+    let coef = inv * rhs;
+    basis
+        .iter()
+        .map(|v| (coef.transpose() * v).norm_squared())
+        .sum()
 }
 
 /// Error statistics with evo's definitions (population std, numpy median).

@@ -230,3 +230,53 @@ fn camera_discrepancy_ignores_a_similarity_and_measures_a_change_of_shape() {
     );
     assert!(camera_discrepancy(&carried[..1]).is_none());
 }
+
+#[test]
+fn camera_discrepancy_tells_a_bent_path_from_cameras_off_on_their_own() {
+    // Sixteen cameras on an arc, as a captured path; B is A carried by a similarity.
+    let truth = known_sim();
+    let cameras: Vec<Se3> = (0..16)
+        .map(|i| {
+            let t = i as f64 / 15.0 - 0.5;
+            Se3::new(
+                *So3::exp(&Vector3::new(0.0, 0.6 * t, 0.0)).matrix(),
+                Vector3::new(2.0 * t.sin(), 0.1 * t, 2.0 * (1.0 - t.cos())),
+            )
+        })
+        .collect();
+    let carried: Vec<(Se3, Se3)> = cameras.iter().map(|a| (*a, truth.act_c2w(a))).collect();
+    let d = camera_discrepancy(&carried).unwrap();
+    assert!(d.centre_pct < 1e-10, "{d:?}");
+    let scale = truth.scale;
+    // Each camera off on its own by a seeded uniform offset, about 1 % of the path's extent:
+    // the quadratic takes about 3/16 of it by chance.
+    let mut state = 7u32;
+    let mut next = || {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (state >> 8) as f64 / (1u32 << 24) as f64 - 0.5
+    };
+    let jittered: Vec<(Se3, Se3)> = carried
+        .iter()
+        .map(|(a, b)| {
+            let off = Vector3::new(next(), next(), next()) * 0.04 * scale;
+            (*a, Se3::new(b.rot, b.trans + off))
+        })
+        .collect();
+    let d = camera_discrepancy(&jittered).unwrap();
+    assert!(d.centre_pct > 0.3, "{d:?}");
+    assert!(d.systematic_share < 0.3, "{d:?}");
+    // The path bent: each camera pushed sideways by a parabola in its place along the path,
+    // the kind of change a similarity cannot undo.
+    let bent: Vec<(Se3, Se3)> = carried
+        .iter()
+        .enumerate()
+        .map(|(i, (a, b))| {
+            let t = i as f64 / 15.0 - 0.5;
+            let off = truth.rot * Vector3::new(0.0, 0.0, 0.08 * (t * t - 1.0 / 12.0)) * scale;
+            (*a, Se3::new(b.rot, b.trans + off))
+        })
+        .collect();
+    let d = camera_discrepancy(&bent).unwrap();
+    assert!(d.centre_pct > 0.2, "{d:?}");
+    assert!(d.systematic_share > 0.8, "{d:?}");
+}
