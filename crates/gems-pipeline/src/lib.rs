@@ -9,7 +9,9 @@
 //!    that model whose sharp renders the image initialiser reconstructs again
 //!    ([`rerun_init_on_renders`]), the run proper starting from the second model unless it
 //!    confirms the first one — its cameras within `init.sfm_rerun_confirm_pct` of their extent
-//!    of the first model's ([`probe::renders_change`], [`probe::confirms_first_model`]) — and,
+//!    of the first model's, the change not mostly a smooth bend of the path
+//!    (`init.sfm_rerun_confirm_max_systematic`; [`probe::renders_change`],
+//!    [`probe::confirms_first_model`]) — and,
 //!    with
 //!    `init.sfm_rerun_probe_fraction` > 0, when a short probe of each fits the blurry photos
 //!    better from it ([`probe`]); trainings

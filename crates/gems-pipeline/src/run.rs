@@ -18,8 +18,8 @@ use crate::init::{
     reruns_on_renders, resolve_init,
 };
 use crate::probe::{
-    RerunChoice, confirms_first_model, continue_from, probe, remove_probe, renders_change,
-    renders_shift,
+    ConfirmRule, RerunChoice, confirms_first_model, continue_from, probe, remove_probe,
+    renders_change, renders_shift,
 };
 
 /// The file a training pass on a [profiled](gems_gpu::Engine::profiled) engine writes into its
@@ -208,10 +208,11 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             } else {
                 (None, None)
             };
-            let (confirm, min_shift) = (
-                cfg.init.sfm_rerun_confirm_pct,
-                cfg.init.sfm_rerun_min_shift_pct,
-            );
+            let rule = ConfirmRule {
+                confirm_pct: cfg.init.sfm_rerun_confirm_pct,
+                max_systematic: cfg.init.sfm_rerun_confirm_max_systematic,
+                min_shift_pct: cfg.init.sfm_rerun_min_shift_pct,
+            };
             let measure = |d: Option<gems_math::CameraDiscrepancy>| {
                 d.map_or_else(
                     || "undetermined".to_owned(),
@@ -223,19 +224,27 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                     },
                 )
             };
+            let systematic = change.map_or_else(
+                || "undetermined".to_owned(),
+                |d| format!("{:.0} %", 100.0 * d.systematic_share),
+            );
             let words = format!(
-                "its cameras lie {} from the first model's (init.sfm_rerun_confirm_pct = \
-                 {confirm}) and {} from the first pass's trained ones \
-                 (init.sfm_rerun_min_shift_pct = {min_shift})",
+                "its cameras lie {} from the first model's (init.sfm_rerun_confirm_pct = {}), \
+                 {systematic} of it a smooth change along the path \
+                 (init.sfm_rerun_confirm_max_systematic = {}), and {} from the first pass's \
+                 trained ones (init.sfm_rerun_min_shift_pct = {})",
                 measure(change),
-                measure(shift)
+                rule.confirm_pct,
+                rule.max_systematic,
+                measure(shift),
+                rule.min_shift_pct
             );
             let choice = if !accepted {
                 RerunChoice::without_probes(
                     false,
                     "the initialiser failed on the renders or left a trained view out".into(),
                 )
-            } else if confirms_first_model(change, shift, confirm, min_shift) {
+            } else if confirms_first_model(change, shift, rule) {
                 RerunChoice {
                     first_model_confirmed: true,
                     ..RerunChoice::without_probes(

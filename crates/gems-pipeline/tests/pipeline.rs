@@ -248,8 +248,10 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
     let (dir, scene) = tiny_scene();
     let out = dir.path().join("run");
     let mut req = first_pass_request(&scene, &out, InitRequest::new(Init::Sfm));
-    // No SfM on renders lands this far from the first model's cameras.
+    // No SfM on renders lands this far from the first model's cameras, and any shape of
+    // change passes.
     req.cfg.init.sfm_rerun_confirm_pct = 1e9;
+    req.cfg.init.sfm_rerun_confirm_max_systematic = 1.0;
     train_scene(req).unwrap();
 
     let choice = gems_pipeline::probe::RerunChoice::read(&out.join("sfm_rerun"))
@@ -258,10 +260,17 @@ fn sfm_rerun_keeps_the_renders_model_only_when_its_cameras_are_its_own() {
     assert!(!choice.kept && choice.first_model_confirmed);
     assert!(
         choice.reason.contains("init.sfm_rerun_confirm_pct")
+            && choice
+                .reason
+                .contains("init.sfm_rerun_confirm_max_systematic")
             && choice.reason.contains("confirms the first model"),
         "{}",
         choice.reason
     );
+    let share = choice
+        .change_systematic_share
+        .expect("the shape is recorded");
+    assert!((0.0..=1.0).contains(&share), "{share}");
     // The run proper trained from the first model with all the steps and, its cameras
     // confirmed by the renders, straight paths first and its exposures' midpoints held on their
     // initial cameras (the first pass had its own paths, free).
@@ -406,6 +415,8 @@ fn an_imported_model_is_checked_on_the_renders_and_held_only_when_confirmed() {
         };
         let mut req = first_pass_request(&scene, &out, init);
         req.cfg.init.sfm_rerun_confirm_pct = confirm_pct;
+        // Whatever the shape of the change: the bound alone decides here.
+        req.cfg.init.sfm_rerun_confirm_max_systematic = 1.0;
         train_scene(req).unwrap();
         let choice = gems_pipeline::probe::RerunChoice::read(&out.join("sfm_rerun"))
             .unwrap()
@@ -494,6 +505,7 @@ fn a_confirmed_model_starts_from_dense_points_when_asked() {
         };
         let mut req = first_pass_request(&scene, &out, init);
         req.cfg.init.sfm_rerun_confirm_pct = 1e9;
+        req.cfg.init.sfm_rerun_confirm_max_systematic = 1.0;
         req.cfg.init.confirmed_dense_points = true;
         req.resume = resume;
         req
