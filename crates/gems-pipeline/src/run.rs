@@ -346,12 +346,12 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         if !keep_rerun
             && choice.first_model_confirmed
             && cfg.init.confirmed_dense_points
-            && let InitMode::Colmap(Some(first_model)) = &mode
+            && let Some(first_model) = pose_model_of(&mode, &scene)
         {
             let dense = rerun.join("dense").join("sparse").join("0");
             let added = add_dense_points(
                 &req.output.join("first_pass"),
-                first_model,
+                &first_model,
                 &dense,
                 &cfg,
                 req.resume,

@@ -497,57 +497,85 @@ fn a_confirmed_model_starts_from_dense_points_when_asked() {
     let imported =
         gems_pipeline::run_sfm(&scene, &dir.path().join("imported"), 5, None, None, None)
             .expect("the SfM registers the tiny scene");
-    let out = dir.path().join("dense");
-    let request = |resume: bool| {
-        let init = InitRequest {
-            colmap_model: Some(imported.clone()),
-            ..InitRequest::new(Init::Colmap)
-        };
-        let mut req = first_pass_request(&scene, &out, init);
-        req.cfg.init.sfm_rerun_confirm_pct = 1e9;
-        req.cfg.init.sfm_rerun_confirm_max_systematic = 1.0;
-        req.cfg.init.confirmed_dense_points = true;
-        req.resume = resume;
-        req
-    };
-    let run = train_scene(request(false)).unwrap();
-
-    // The run proper trained from the imported model's cameras with the first pass's dense
-    // points beside its own.
-    let dense_dir = out.join("sfm_rerun").join("dense").join("sparse").join("0");
-    let (model, dense) = (
-        gems_data::colmap::read_model(&imported).unwrap(),
-        gems_data::colmap::read_model(&dense_dir).unwrap(),
-    );
-    assert_eq!(model.images, dense.images);
-    assert_eq!(model.points, dense.points[..model.points.len()]);
-    let added = dense.points.len() - model.points.len();
-    assert!(added > 0, "no dense points");
-    let cfg = TrainConfig::from_toml_file(&out.join("config.toml")).unwrap();
-    assert!(added + model.points.len() <= cfg.init.min_points);
-    let trained = gems_train::TrainOutput::load(&out).unwrap();
-    assert!(
-        trained.init_label.contains("dense"),
-        "{}",
-        trained.init_label
-    );
-    let run_init = trained.run.unwrap().init;
-    assert!(
-        run_init.contains(&format!("with {added} dense points")),
-        "{run_init}"
-    );
-
-    // Resumed after the first pass: the dense model is reused, and the run is the same.
-    let cloud = std::fs::read(&run.point_cloud).unwrap();
-    for f in [
-        "checkpoint.json",
-        "checkpoint.safetensors",
-        "point_cloud.ply",
+    // The same model as the scene's own (`sparse/0` in its folder, as a dataset ships it), which
+    // `--init colmap` reads without `--colmap-model`.
+    let own_scene = dir.path().join("scene_with_model");
+    copy_dir(&scene, &own_scene);
+    copy_dir(&imported, &own_scene.join("sparse").join("0"));
+    for (scene, colmap_model, name) in [
+        (&scene, Some(imported.clone()), "dense"),
+        (&own_scene, None, "dense_own"),
     ] {
-        std::fs::remove_file(out.join(f)).unwrap();
+        let out = dir.path().join(name);
+        let request = |resume: bool| {
+            let init = InitRequest {
+                colmap_model: colmap_model.clone(),
+                ..InitRequest::new(Init::Colmap)
+            };
+            let mut req = first_pass_request(scene, &out, init);
+            req.cfg.init.sfm_rerun_confirm_pct = 1e9;
+            req.cfg.init.sfm_rerun_confirm_max_systematic = 1.0;
+            req.cfg.init.confirmed_dense_points = true;
+            req.resume = resume;
+            req
+        };
+        let run = train_scene(request(false)).unwrap();
+
+        // The run proper trained from the model's cameras with the first pass's dense points
+        // beside its own.
+        let dense_dir = out.join("sfm_rerun").join("dense").join("sparse").join("0");
+        let (model, dense) = (
+            gems_data::colmap::read_model(&imported).unwrap(),
+            gems_data::colmap::read_model(&dense_dir).unwrap(),
+        );
+        assert_eq!(model.images, dense.images, "{name}");
+        assert_eq!(model.points, dense.points[..model.points.len()], "{name}");
+        let added = dense.points.len() - model.points.len();
+        assert!(added > 0, "{name}: no dense points");
+        let cfg = TrainConfig::from_toml_file(&out.join("config.toml")).unwrap();
+        assert!(added + model.points.len() <= cfg.init.min_points);
+        let trained = gems_train::TrainOutput::load(&out).unwrap();
+        assert!(
+            trained.init_label.contains("dense"),
+            "{name}: {}",
+            trained.init_label
+        );
+        let run_init = trained.run.unwrap().init;
+        assert!(
+            run_init.contains(&format!("with {added} dense points")),
+            "{name}: {run_init}"
+        );
+
+        // Resumed after the first pass: the dense model is reused, and the run is the same.
+        let cloud = std::fs::read(&run.point_cloud).unwrap();
+        for f in [
+            "checkpoint.json",
+            "checkpoint.safetensors",
+            "point_cloud.ply",
+        ] {
+            std::fs::remove_file(out.join(f)).unwrap();
+        }
+        let resumed = train_scene(request(true)).unwrap();
+        assert_eq!(
+            cloud,
+            std::fs::read(&resumed.point_cloud).unwrap(),
+            "{name}"
+        );
     }
-    let resumed = train_scene(request(true)).unwrap();
-    assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
+}
+
+/// Copies the folder `from` (files and subfolders) to `to`.
+fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
 }
 
 #[test]
