@@ -142,8 +142,9 @@ pub fn reruns_on_renders(init: Init) -> bool {
 /// Whether a run from `init` trains a first pass and runs an initialiser on its sharp renders
 /// (`init.sfm_rerun_fraction`): the image initialisers ([`reruns_on_renders`]), whose model the
 /// renders' one may replace, and an imported COLMAP model, which the built-in SfM on the renders
-/// only measures: when it confirms the model (`init.sfm_rerun_confirm_pct`), the model's cameras
-/// are measured accurate and the run proper holds them (`init.confirmed_hold_midpoint`);
+/// only measures: when it confirms the model (`init.sfm_rerun_confirm_imported_pct`), the
+/// model's cameras are measured accurate and the run proper holds them
+/// (`init.confirmed_hold_midpoint`);
 /// otherwise the run proper trains from the model as it is (and with `pose.optimize` off it is
 /// not checked: nothing moves its cameras). Ground-truth poses need no check.
 pub fn checked_on_renders(init: Init) -> bool {

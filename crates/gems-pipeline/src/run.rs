@@ -208,8 +208,18 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             } else {
                 (None, None)
             };
+            // The bound's name and value: an imported model has its own (never replaced, it
+            // would otherwise train with free paths from its own cameras).
+            let (bound_name, confirm_pct) = if imported {
+                (
+                    "init.sfm_rerun_confirm_imported_pct",
+                    cfg.init.sfm_rerun_confirm_imported_pct,
+                )
+            } else {
+                ("init.sfm_rerun_confirm_pct", cfg.init.sfm_rerun_confirm_pct)
+            };
             let rule = ConfirmRule {
-                confirm_pct: cfg.init.sfm_rerun_confirm_pct,
+                confirm_pct,
                 max_systematic: cfg.init.sfm_rerun_confirm_max_systematic,
                 min_shift_pct: cfg.init.sfm_rerun_min_shift_pct,
             };
@@ -229,7 +239,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                 |d| format!("{:.0} %", 100.0 * d.systematic_share),
             );
             let words = format!(
-                "its cameras lie {} from the first model's (init.sfm_rerun_confirm_pct = {}), \
+                "its cameras lie {} from the first model's ({bound_name} = {}), \
                  {systematic} of it a smooth change along the path \
                  (init.sfm_rerun_confirm_max_systematic = {}), and {} from the first pass's \
                  trained ones (init.sfm_rerun_min_shift_pct = {})",

@@ -414,7 +414,10 @@ fn an_imported_model_is_checked_on_the_renders_and_held_only_when_confirmed() {
             ..InitRequest::new(Init::Colmap)
         };
         let mut req = first_pass_request(&scene, &out, init);
-        req.cfg.init.sfm_rerun_confirm_pct = confirm_pct;
+        // An imported model's own bound decides, not the one for the built-in SfM's first model
+        // (set to the opposite answer).
+        req.cfg.init.sfm_rerun_confirm_imported_pct = confirm_pct;
+        req.cfg.init.sfm_rerun_confirm_pct = 1e9 - confirm_pct;
         // Whatever the shape of the change: the bound alone decides here.
         req.cfg.init.sfm_rerun_confirm_max_systematic = 1.0;
         train_scene(req).unwrap();
@@ -442,7 +445,9 @@ fn an_imported_model_is_checked_on_the_renders_and_held_only_when_confirmed() {
     assert_trained_from_the_dense_model(&trained);
     let run_init = trained.run.unwrap().init;
     assert!(
-        run_init.contains("checked by the built-in SfM") && run_init.contains("confirms"),
+        run_init.contains("checked by the built-in SfM")
+            && run_init.contains("confirms")
+            && run_init.contains("init.sfm_rerun_confirm_imported_pct"),
         "{run_init}"
     );
     // The renders' SfM started from the imported model's focal, not a search of its own.
@@ -513,7 +518,7 @@ fn a_confirmed_model_starts_from_dense_points_when_asked() {
                 ..InitRequest::new(Init::Colmap)
             };
             let mut req = first_pass_request(scene, &out, init);
-            req.cfg.init.sfm_rerun_confirm_pct = 1e9;
+            req.cfg.init.sfm_rerun_confirm_imported_pct = 1e9;
             req.cfg.init.sfm_rerun_confirm_max_systematic = 1.0;
             req.cfg.init.confirmed_dense_points = true;
             req.resume = resume;
