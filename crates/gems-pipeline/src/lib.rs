@@ -22,7 +22,8 @@
 //!    and, with `init.confirmed_dense_points`, starts from dense points fused from the first
 //!    pass's depth maps ([`dense`]).
 //!    An imported COLMAP model gets the same first pass, and the built-in SfM on its renders
-//!    only measures it ([`checked_on_renders`]): confirmed, the model's cameras are held;
+//!    only measures it ([`checked_on_renders`]), with a bound of its own
+//!    (`init.sfm_rerun_confirm_imported_pct`): confirmed, the model's cameras are held;
 //!    otherwise it is trained from as it is, never replaced;
 //! 2. **training** (gems-train), with periodic atomic checkpoints and resume;
 //! 3. **exports**: `point_cloud.ply` (input frame), `model.json`, `config.toml`;
