@@ -225,19 +225,10 @@ fn sfm_rerun_trains_a_first_pass_and_initialises_again_on_its_renders() {
     assert_eq!(cloud, std::fs::read(&again.point_cloud).unwrap());
 
     // Resumed after the second model was written, or after the first pass only: the same run.
-    let forget_run_proper = || {
-        for f in [
-            "checkpoint.json",
-            "checkpoint.safetensors",
-            "point_cloud.ply",
-        ] {
-            std::fs::remove_file(out.join(f)).unwrap();
-        }
-    };
-    forget_run_proper();
+    forget_run_proper(&out);
     let resumed = run_with(&out, true);
     assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
-    forget_run_proper();
+    forget_run_proper(&out);
     std::fs::remove_dir_all(out.join("sfm_rerun")).unwrap();
     let resumed = run_with(&out, true);
     assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
@@ -553,19 +544,25 @@ fn a_confirmed_model_starts_from_dense_points_when_asked() {
 
         // Resumed after the first pass: the dense model is reused, and the run is the same.
         let cloud = std::fs::read(&run.point_cloud).unwrap();
-        for f in [
-            "checkpoint.json",
-            "checkpoint.safetensors",
-            "point_cloud.ply",
-        ] {
-            std::fs::remove_file(out.join(f)).unwrap();
-        }
+        forget_run_proper(&out);
         let resumed = train_scene(request(true)).unwrap();
         assert_eq!(
             cloud,
             std::fs::read(&resumed.point_cloud).unwrap(),
             "{name}"
         );
+    }
+}
+
+/// Removes the run proper's checkpoint and exports from `out`, so that a resumed run trains it
+/// again from what the first pass left.
+fn forget_run_proper(out: &std::path::Path) {
+    for f in [
+        "checkpoint.json",
+        "checkpoint.safetensors",
+        "point_cloud.ply",
+    ] {
+        std::fs::remove_file(out.join(f)).unwrap();
     }
 }
 
@@ -677,13 +674,7 @@ fn sfm_rerun_keeps_the_renders_model_only_as_its_probe_says() {
     // Without a checkpoint the run proper trains from scratch, so the same result also says
     // that continuing the kept model's probe is exact.
     let cloud = std::fs::read(&first.point_cloud).unwrap();
-    for f in [
-        "checkpoint.json",
-        "checkpoint.safetensors",
-        "point_cloud.ply",
-    ] {
-        std::fs::remove_file(out.join(f)).unwrap();
-    }
+    forget_run_proper(&out);
     std::fs::remove_dir_all(out.join("first_pass")).unwrap();
     let resumed = run(true);
     assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
