@@ -207,25 +207,39 @@ pub fn fuse_depth_maps(
     kept
 }
 
-/// Renders `gaussians` from each `(intrinsics, render_c2w, attach_c2w)` with surface depth
-/// (`gems_splat::Renderer::surface_depth`): the maps made at `render_c2w` (where the Gaussians
-/// were trained to be seen from), attached to the camera `attach_c2w` the points will belong
-/// to. On the CPU renderer whatever the training engine: surface depth is a CPU-only, forward-only
-/// pass, and a few dozen views cost seconds.
+/// One view to render for the fusion: the camera the first pass's Gaussians are seen from, and
+/// the camera of the model the fused points are for, which the maps are attached to. Both
+/// cameras have the same image size; their intrinsics differ when the model is another SfM's
+/// (it estimated its own focal on the same pixels).
+#[derive(Clone, Copy, Debug)]
+pub struct DepthCamera {
+    /// Where the maps are rendered: the first pass's intrinsics and camera to world.
+    pub render: (Intrinsics, Se3),
+    /// The model's camera the maps belong to: its intrinsics and camera to world.
+    pub attach: (Intrinsics, Se3),
+}
+
+/// Renders `gaussians` from each [`DepthCamera`] with surface depth
+/// (`gems_splat::Renderer::surface_depth`): the maps made at its `render` camera (where the
+/// Gaussians were trained to be seen from), attached to its `attach` camera. On the CPU
+/// renderer whatever the training engine: surface depth is a CPU-only, forward-only pass, and a
+/// few dozen views cost seconds.
 pub fn render_depth_views(
     gaussians: &Gaussians,
-    cameras: &[(Intrinsics, Se3, Se3)],
+    cameras: &[DepthCamera],
 ) -> Result<Vec<DepthView>, PipelineError> {
     let settings = RenderSettings::default();
     let mut renderer = Renderer::new();
     cameras
         .iter()
-        .map(|(k, render_c2w, attach_c2w)| {
+        .map(|c| {
+            let (k, render_c2w) = &c.render;
+            let (attach_k, attach_c2w) = &c.attach;
             let cam = [Camera::from_c2w(k, render_c2w)];
             let out = renderer.forward(gaussians, &cam, &[[0.0; 3]], &settings)?;
             Ok(DepthView {
                 w2c: attach_c2w.inverse(),
-                intrinsics: *k,
+                intrinsics: *attach_k,
                 depth: renderer.surface_depth(gaussians, &cam)?,
                 rgb: out.rgb,
                 alpha: out.alpha,
@@ -234,26 +248,62 @@ pub fn render_depth_views(
         .collect()
 }
 
-/// The first model with dense points added: the first pass (`first`, trained from `model`'s
-/// cameras) renders each training view at its trained midpoint, and [`fuse_depth_maps`] turns
-/// the maps, attached to the view's initial (the model's) camera, into up to `target` points
-/// beside the model's own. Returns the model and how many points it gained.
+/// Which cameras of a model the fused points are attached to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModelCameras {
+    /// The model the first pass trained from: its cameras are the first pass's initial ones,
+    /// in the first pass's frame.
+    FirstPass,
+    /// Another model of the same training views (the SfM on the first pass's renders, which
+    /// are these very pixels): its own cameras, matched by image name, in its own frame. A
+    /// view the model lacks gives no points.
+    Own,
+}
+
+/// `model` with dense points added: the first pass (`first`) renders each training view at its
+/// trained midpoint, and [`fuse_depth_maps`] turns the maps, attached to the view's camera in
+/// `model` (`cameras`), into up to `target` points beside the model's own. Returns the model and
+/// how many points it gained.
 pub fn with_dense_points(
     first: &TrainOutput,
     model: &SparseModel,
+    cameras: ModelCameras,
     target: usize,
 ) -> Result<(SparseModel, usize), PipelineError> {
     let norm = &first.normalization;
-    let cameras: Vec<(Intrinsics, Se3, Se3)> = first
+    let depth_cameras: Vec<DepthCamera> = first
         .views
         .iter()
-        .map(|v| (v.intrinsics, Se3::from(&v.mid_c2w), Se3::from(&v.c2w_init)))
+        .filter_map(|v| {
+            let render = (v.intrinsics, Se3::from(&v.mid_c2w));
+            let attach = match cameras {
+                ModelCameras::FirstPass => (v.intrinsics, Se3::from(&v.c2w_init)),
+                ModelCameras::Own => {
+                    let image = model.image_by_name(&v.name)?;
+                    let k = model.camera(image.camera_id)?.intrinsics().ok()?;
+                    (
+                        k.resized(v.intrinsics.width, v.intrinsics.height),
+                        Se3::from(&image.pose()).inverse(),
+                    )
+                }
+            };
+            Some(DepthCamera { render, attach })
+        })
         .collect();
-    let views = render_depth_views(&first.gaussians, &cameras)?;
+    let views = render_depth_views(&first.gaussians, &depth_cameras)?;
+    // The sparse points in the cameras' frame, and the fused points back in the model's.
+    let to_cameras = |p: Vector3<f64>| match cameras {
+        ModelCameras::FirstPass => norm.apply_point(&p),
+        ModelCameras::Own => p,
+    };
+    let to_model = |p: &Vector3<f64>| match cameras {
+        ModelCameras::FirstPass => norm.invert_point(p),
+        ModelCameras::Own => *p,
+    };
     let sparse: Vec<Vector3<f64>> = model
         .points
         .iter()
-        .map(|p| norm.apply_point(&Vector3::from(p.xyz)))
+        .map(|p| to_cameras(Vector3::from(p.xyz)))
         .collect();
     let fused = fuse_depth_maps(&views, &sparse, target);
     let next_id = model.points.iter().map(|p| p.id).max().unwrap_or(0) + 1;
@@ -261,7 +311,7 @@ pub fn with_dense_points(
     dense
         .points
         .extend(fused.iter().zip(next_id..).map(|(p, id)| {
-            let xyz = norm.invert_point(&p.xyz);
+            let xyz = to_model(&p.xyz);
             Point3D {
                 id,
                 xyz: [xyz.x, xyz.y, xyz.z],
@@ -364,10 +414,42 @@ mod tests {
         assert!(lone.is_empty(), "one view agrees with nothing");
     }
 
+    /// A similarity of 3D space, `p ↦ scale · rot · p + trans`: another model's frame.
+    #[derive(Clone, Copy)]
+    struct Similarity {
+        rot: Se3,
+        scale: f64,
+    }
+
+    impl Similarity {
+        fn identity() -> Self {
+            Self {
+                rot: Se3::identity(),
+                scale: 1.0,
+            }
+        }
+
+        fn point(&self, p: &Vector3<f64>) -> Vector3<f64> {
+            self.scale * (self.rot.rot * p) + self.rot.trans
+        }
+
+        fn inverse_point(&self, p: &Vector3<f64>) -> Vector3<f64> {
+            self.rot.rot.transpose() * ((p - self.rot.trans) / self.scale)
+        }
+
+        fn c2w(&self, c2w: &Se3) -> Se3 {
+            Se3 {
+                rot: self.rot.rot * c2w.rot,
+                trans: self.point(&c2w.trans),
+            }
+        }
+    }
+
     /// Points fused from the CPU engine's renders of small opaque discs tiling the slanted
-    /// plane z = 5 + `slope`·x, each map attached to the camera it was rendered from; returns
-    /// each point's signed depth error along z.
-    fn fused_slanted_plane(slope: f64) -> Vec<f64> {
+    /// plane z = 5 + `slope`·x, each map attached to the camera it was rendered from carried
+    /// into the frame `frame` (with the sparse points); returns each point's signed depth error
+    /// along z, once carried back.
+    fn fused_slanted_plane(slope: f64, frame: Similarity) -> Vec<f64> {
         let plane_z = |x: f64| 5.0 + slope * x;
         let mut g = Gaussians::with_degree(0);
         let mut sh = [[0.0f32; 3]; gems_splat::SH_COEFFS];
@@ -384,11 +466,14 @@ mod tests {
             }
         }
         let k = test_camera();
-        let cameras: Vec<(Intrinsics, Se3, Se3)> = [-0.3, -0.1, 0.1, 0.3]
+        let cameras: Vec<DepthCamera> = [-0.3, -0.1, 0.1, 0.3]
             .iter()
             .map(|&x| {
                 let c2w = Se3::exp(&Vector6::new(x, 0.1, 0.0, 0.0, 0.0, 0.0));
-                (k, c2w, c2w)
+                DepthCamera {
+                    render: (k, c2w),
+                    attach: (k, frame.c2w(&c2w)),
+                }
             })
             .collect();
         let views = render_depth_views(&g, &cameras).unwrap();
@@ -398,12 +483,18 @@ mod tests {
                     -0.5 + 0.15 * f64::from(i % 8),
                     -0.6 + 0.3 * f64::from(i / 8),
                 );
-                Vector3::new(x, y, plane_z(x))
+                frame.point(&Vector3::new(x, y, plane_z(x)))
             })
             .collect();
         let points = fuse_depth_maps(&views, &sparse, 1000);
         assert!(points.len() > 400, "{} points", points.len());
-        points.iter().map(|p| p.xyz.z - plane_z(p.xyz.x)).collect()
+        points
+            .iter()
+            .map(|p| {
+                let xyz = frame.inverse_point(&p.xyz);
+                xyz.z - plane_z(xyz.x)
+            })
+            .collect()
     }
 
     #[test]
@@ -413,7 +504,10 @@ mod tests {
         // composited centre depths, put them up to 3 % in front). A pixel-centre convention
         // differing between the renderer and the back-projection would shift the two mirrored
         // planes' points in opposite directions, by about 0.06.
-        let (rising, falling) = (fused_slanted_plane(1.0), fused_slanted_plane(-1.0));
+        let (rising, falling) = (
+            fused_slanted_plane(1.0, Similarity::identity()),
+            fused_slanted_plane(-1.0, Similarity::identity()),
+        );
         let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len() as f64;
         for errors in [&rising, &falling] {
             let worst = errors.iter().fold(0.0f64, |w, e| w.max(e.abs()));
@@ -421,6 +515,20 @@ mod tests {
         }
         let (a, b) = (mean(&rising), mean(&falling));
         assert!((a - b).abs() < 0.002, "mean errors {a} and {b}");
+    }
+
+    #[test]
+    fn maps_attached_to_another_models_cameras_fuse_in_its_frame() {
+        // Another model of the same pixels (the SfM on the renders) has its own frame: turned,
+        // moved and three times smaller. The per-view alignment takes its scale, and the points
+        // land on the plane as that model places it, as precisely as in the renders' own frame.
+        let frame = Similarity {
+            rot: Se3::exp(&Vector6::new(0.4, -1.2, 2.0, 0.3, -0.5, 0.2)),
+            scale: 1.0 / 3.0,
+        };
+        let errors = fused_slanted_plane(1.0, frame);
+        let worst = errors.iter().fold(0.0f64, |w, e| w.max(e.abs()));
+        assert!(worst < 0.01, "a point {worst} off the plane");
     }
 
     #[test]

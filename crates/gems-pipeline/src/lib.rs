@@ -20,7 +20,8 @@
 //!    `init.accurate_poses_straight_fraction` as their `pose.straight_fraction`, and the run
 //!    proper from a confirmed first model holds its cameras (`init.confirmed_hold_midpoint`)
 //!    and, with `init.confirmed_dense_points`, starts from dense points fused from the first
-//!    pass's depth maps ([`dense`]).
+//!    pass's depth maps ([`dense`]); with `init.renders_dense_points` the run proper from the
+//!    renders' model does too, attached to that model's cameras.
 //!    An imported COLMAP model gets the same first pass, and the built-in SfM on its renders
 //!    only measures it ([`checked_on_renders`]), with a bound of its own
 //!    (`init.sfm_rerun_confirm_imported_pct`): confirmed, the model's cameras are held;

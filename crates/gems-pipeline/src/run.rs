@@ -353,21 +353,32 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
         if keep_rerun {
             mode = InitMode::Colmap(Some(rerun.join("sparse").join("0")));
         }
-        if !keep_rerun
-            && choice.first_model_confirmed
-            && cfg.init.confirmed_dense_points
-            && let Some(first_model) = pose_model_of(&mode, &scene)
+        // Dense points from the first pass's depth maps, attached to the cameras the run
+        // proper starts from: the confirmed first model's, or the renders' model's own (its
+        // images are the first pass's renders). Not after probes: the kept one's run proper
+        // continues from its checkpoint, which started from the sparse points.
+        let dense_from = if keep_rerun {
+            (cfg.init.renders_dense_points && choice.probe_steps == 0)
+                .then_some((dense::ModelCameras::Own, "init.renders_dense_points"))
+        } else {
+            (choice.first_model_confirmed && cfg.init.confirmed_dense_points).then_some((
+                dense::ModelCameras::FirstPass,
+                "init.confirmed_dense_points",
+            ))
+        };
+        if let Some((cameras, field)) = dense_from
+            && let Some(start_model) = pose_model_of(&mode, &scene)
         {
             let dense = rerun.join("dense").join("sparse").join("0");
             let added = add_dense_points(
                 &req.output.join("first_pass"),
-                &first_model,
+                (&start_model, cameras),
                 &dense,
                 &cfg,
                 req.resume,
             )?;
             description.init = format!(
-                "{}, with {} dense points from the first pass's depth maps (init.confirmed_dense_points)",
+                "{}, with {} dense points from the first pass's depth maps ({field})",
                 description.init,
                 added.map_or_else(|| "the earlier run's".to_owned(), |n| n.to_string())
             );
@@ -392,13 +403,13 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
     })
 }
 
-/// Writes into `dense` the confirmed first model at `first_model` with dense points from the
-/// first pass in `first_pass` ([`dense::with_dense_points`]), up to `init.min_points` points in
-/// all, and returns how many it added; a resumed run reuses the model an earlier one wrote
-/// (`None`).
+/// Writes into `dense` the model at `start_model.0` (the run proper's start, whose cameras are
+/// picked by `start_model.1`) with dense points from the first pass in `first_pass`
+/// ([`dense::with_dense_points`]), up to `init.min_points` points in all, and returns how many
+/// it added; a resumed run reuses the model an earlier one wrote (`None`).
 fn add_dense_points(
     first_pass: &Path,
-    first_model: &Path,
+    start_model: (&Path, dense::ModelCameras),
     dense: &Path,
     cfg: &TrainConfig,
     resume: bool,
@@ -407,13 +418,13 @@ fn add_dense_points(
         return Ok(None);
     }
     let first = TrainOutput::load(first_pass)?;
-    let model = gems_data::colmap::read_model(first_model)?;
+    let model = gems_data::colmap::read_model(start_model.0)?;
     let target = cfg
         .init
         .min_points
         .min(cfg.mcmc.cap_max)
         .saturating_sub(model.points.len());
-    let (with_dense, added) = dense::with_dense_points(&first, &model, target)?;
+    let (with_dense, added) = dense::with_dense_points(&first, &model, start_model.1, target)?;
     gems_data::colmap::write_model(dense, &with_dense, gems_data::colmap::ModelFormat::Binary)?;
     tracing::info!(
         added,

@@ -554,6 +554,57 @@ fn a_confirmed_model_starts_from_dense_points_when_asked() {
     }
 }
 
+#[test]
+fn the_renders_model_starts_from_dense_points_when_asked() {
+    let (dir, scene) = tiny_scene();
+    let out = dir.path().join("run");
+    let request = |resume: bool| {
+        let mut req = first_pass_request(&scene, &out, InitRequest::new(Init::Sfm));
+        // The renders' model is kept, whatever its cameras.
+        req.cfg.init.sfm_rerun_confirm_pct = 0.0;
+        req.cfg.init.renders_dense_points = true;
+        req.resume = resume;
+        req
+    };
+    let run = train_scene(request(false)).unwrap();
+    let choice = gems_pipeline::probe::RerunChoice::read(&out.join("sfm_rerun"))
+        .unwrap()
+        .expect("the choice is written");
+    assert!(choice.kept, "{}", choice.reason);
+
+    // The run proper trained from the renders' model's cameras with dense points beside its own
+    // points, in its frame: each lies in front of the cameras that see it.
+    let rerun = out.join("sfm_rerun");
+    let (model, dense) = (
+        gems_data::colmap::read_model(&rerun.join("sparse").join("0")).unwrap(),
+        gems_data::colmap::read_model(&rerun.join("dense").join("sparse").join("0")).unwrap(),
+    );
+    assert_eq!(model.images, dense.images);
+    assert_eq!(model.points, dense.points[..model.points.len()]);
+    let added = &dense.points[model.points.len()..];
+    assert!(!added.is_empty(), "no dense points");
+    for p in added {
+        let seen_in_front = model.images.iter().filter(|i| {
+            let pose = gems_math::Se3::from(&i.pose());
+            (pose.rot * gems_math::Vector3::from(p.xyz) + pose.trans).z > 0.0
+        });
+        assert!(seen_in_front.count() >= 3, "{p:?}");
+    }
+    let trained = gems_train::TrainOutput::load(&out).unwrap();
+    let run_init = trained.run.unwrap().init;
+    assert!(
+        run_init.contains(&format!("with {} dense points", added.len()))
+            && run_init.contains("init.renders_dense_points"),
+        "{run_init}"
+    );
+
+    // Resumed after the first pass: the dense model is reused, and the run is the same.
+    let cloud = std::fs::read(&run.point_cloud).unwrap();
+    forget_run_proper(&out);
+    let resumed = train_scene(request(true)).unwrap();
+    assert_eq!(cloud, std::fs::read(&resumed.point_cloud).unwrap());
+}
+
 /// Removes the run proper's checkpoint and exports from `out`, so that a resumed run trains it
 /// again from what the first pass left.
 fn forget_run_proper(out: &std::path::Path) {

@@ -378,6 +378,13 @@ pub struct InitConfig {
     /// +1.45 and +0.1 dB refined novel views (BENCHMARKS.md, "Surface depth for the dense
     /// points", "A third seed for the dense points"). false: the sparse points topped up.
     pub confirmed_dense_points: bool,
+    /// The run proper from the model the SfM made on the first pass's renders starts from that
+    /// model's points and dense points fused from the first pass's depth maps as with
+    /// `confirmed_dense_points`, attached to the renders' model's own cameras (its images are
+    /// those renders; each map is aligned to its sparse depths). The model with them is
+    /// `sfm_rerun/dense/sparse/0`. Not after probes (`sfm_rerun_probe_fraction`), whose run
+    /// proper continues from the kept probe. Default false. false: the sparse points topped up.
+    pub renders_dense_points: bool,
     /// σ, as a fraction of the focal, of the prior under which the built-in SfM refines a focal
     /// read from the photos' EXIF (gems-pipeline; `gems_init::sfm::EXIF_FOCAL_PRIOR`, whose value
     /// this default is). 0 holds the EXIF focal fixed. A focal given on the command line is
@@ -418,6 +425,7 @@ impl Default for InitConfig {
             confirmed_anchor_weight: 100.0,
             confirmed_hold_midpoint: true,
             confirmed_dense_points: true,
+            renders_dense_points: false,
             exif_focal_prior: 0.02,
         }
     }
