@@ -1,5 +1,6 @@
 //! Dense initial points for the run proper from a confirmed first model
-//! (`init.confirmed_dense_points`).
+//! (`init.confirmed_dense_points`), or from the renders' model (`init.renders_dense_points`,
+//! whose maps are attached to that model's own cameras: [`ModelCameras`]).
 //!
 //! Once the SfM on the first pass's renders has confirmed the first model's cameras, those
 //! cameras are accurate, but the run proper still starts from the model's sparse points, which
@@ -133,9 +134,10 @@ pub struct DensePoint {
 }
 
 /// Fuses the views' depth maps into at most `target` points (fewer when fewer agree): each
-/// view's map scaled by its [`DepthView::alignment`] to the `sparse` points, sampled on a grid
-/// as dense as `target` asks, back-projected, and kept where [`MIN_AGREEING_VIEWS`] other views'
-/// aligned depths agree within [`DEPTH_TOLERANCE`]. Views that cannot be aligned give and check
+/// view's map scaled to the `sparse` points (the median ratio of their depths to the rendered
+/// ones, `DepthView::alignment`), sampled on a grid as dense as `target` asks, back-projected,
+/// and kept where [`MIN_AGREEING_VIEWS`] other views' aligned depths agree within
+/// [`DEPTH_TOLERANCE`]. Views that cannot be aligned give and check
 /// nothing. Deterministic: the kept points are thinned evenly, in view and pixel order.
 pub fn fuse_depth_maps(
     views: &[DepthView],
