@@ -175,6 +175,7 @@ fn busy_texture_scene_sharp_and_blurred() {
     let err = common::aligned_rmse_fraction(&poses, &s.gt);
     assert!(err < 0.01, "sharp: {err}");
     assert!(r.stats.advice.is_empty(), "{:?}", r.stats.advice);
+    assert!(!r.stats.focal_barely_determined);
     let s = common::scene(12, 240, 180, 7, 0.12, 42);
     let r = run_sfm(&s.images, &SfmOptions::default()).expect("sfm");
     assert_eq!(
@@ -193,6 +194,7 @@ fn busy_texture_scene_sharp_and_blurred() {
         "{:?}",
         r.stats.advice
     );
+    assert!(r.stats.focal_barely_determined);
 }
 
 /// A focal read from EXIF is rarely exact. One 4 % low, refined under `EXIF_FOCAL_PRIOR` in

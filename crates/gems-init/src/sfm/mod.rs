@@ -360,6 +360,11 @@ pub struct SfmStats {
     pub final_size: u32,
     pub focal: f64,
     pub focal_from_metadata: bool,
+    /// Whether the focal was estimated (not given, not from EXIF) from photos blurred by more
+    /// than [`FOCAL_ADVICE_BLUR`] of their long side, which barely determine it: the report's
+    /// advice then asks for `--focal`, and a model so made is not measured accurate by a check
+    /// on sharp renders made with its own focal (gems-pipeline, `init.confirmed_hold_blurred_focal`).
+    pub focal_barely_determined: bool,
     /// Seconds spent in feature extraction + matching, and in reconstruction.
     pub seconds_features: f64,
     pub seconds_reconstruction: f64,
@@ -439,11 +444,17 @@ fn explain_unregistered(stats: &mut SfmStats, textureless: &[String]) {
 /// the truth").
 pub const FOCAL_ADVICE_BLUR: f64 = 0.05;
 
-/// The advice sentence for a focal the SfM estimated (not given, not from EXIF) from photos
-/// blurred by more than [`FOCAL_ADVICE_BLUR`] of their `long` side.
+/// Whether the focal of `stats` was estimated (not given, not from EXIF) from photos blurred by
+/// more than [`FOCAL_ADVICE_BLUR`] of their `long` side ([`SfmStats::focal_barely_determined`]).
+fn focal_barely_determined(stats: &SfmStats, long: f64) -> bool {
+    !stats.focal_from_metadata && stats.blur_px_estimate / long > FOCAL_ADVICE_BLUR
+}
+
+/// The advice sentence for a focal the SfM estimated from photos blurred by more than
+/// [`FOCAL_ADVICE_BLUR`] of their `long` side ([`focal_barely_determined`]).
 fn focal_advice(stats: &SfmStats, long: f64) -> Option<String> {
     let fraction = stats.blur_px_estimate / long;
-    (!stats.focal_from_metadata && fraction > FOCAL_ADVICE_BLUR).then(|| {
+    focal_barely_determined(stats, long).then(|| {
         format!(
             "The focal length ({:.0} px) was estimated from photos blurred by about {:.0} px \
              ({:.0} % of their long side), which barely determine it: at such blur the estimate \
@@ -737,6 +748,7 @@ pub fn run_sfm(images: &[SfmImage], opts: &SfmOptions) -> Result<SfmResult, SfmE
         v.blur_px = f64::from(*b);
     }
     explain_unregistered(&mut result.stats, textureless.as_deref().unwrap_or(&[]));
+    result.stats.focal_barely_determined = focal_barely_determined(&result.stats, long);
     if let Some(line) = focal_advice(&result.stats, long) {
         result.stats.advice.push(line);
     }
@@ -1456,6 +1468,7 @@ mod tests {
             final_size: 128,
             focal: 207.8,
             focal_from_metadata: given,
+            focal_barely_determined: false,
             seconds_features: 0.5,
             seconds_reconstruction: 0.5,
             blur_px_estimate: blur,
@@ -1480,6 +1493,19 @@ mod tests {
             None,
             "a focal given or read from EXIF"
         );
+        // The report's flag says the same.
+        for (given, blur, barely) in [
+            (false, 18.0, true),
+            (false, 12.0, false),
+            (false, 0.0, false),
+            (true, 30.0, false),
+        ] {
+            assert_eq!(
+                focal_barely_determined(&stats_with(given, blur), 240.0),
+                barely,
+                "given {given}, blur {blur}"
+            );
+        }
     }
 
     #[test]

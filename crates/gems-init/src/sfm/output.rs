@@ -124,6 +124,8 @@ pub(crate) fn assemble(
         final_size: working_size,
         focal: camera.focal,
         focal_from_metadata,
+        // Set by `run_sfm`, which knows the blur.
+        focal_barely_determined: false,
         seconds_features: 0.0,
         seconds_reconstruction: 0.0,
         blur_px_estimate: 0.0,
