@@ -297,7 +297,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
                 ];
                 let mut losses = [0.0; 2];
                 for ((renders, candidate, dir), loss) in candidates.iter().zip(&mut losses) {
-                    let model = RunProperModel::of(*renders, false);
+                    let model = RunProperModel::of(*renders, false, false);
                     let cfg = run_proper_config(&cfg, model, rest);
                     (*loss, engine) = probe(&scene, candidate, &cfg, probe_steps, engine, dir)?;
                 }
@@ -384,7 +384,20 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             );
             mode = InitMode::Colmap(Some(dense));
         }
-        let model = RunProperModel::of(keep_rerun, choice.first_model_confirmed);
+        let held = holds_confirmed_cameras(imported, &req.output.join("sfm"), &cfg);
+        if choice.first_model_confirmed && !keep_rerun && !held {
+            description.init = format!(
+                "{}; its cameras are not held: the SfM estimated its focal under heavy blur, \
+                 which the check on renders made with that focal cannot measure \
+                 (init.confirmed_hold_blurred_focal = false)",
+                description.init
+            );
+            tracing::info!(
+                "the confirmed first model's focal was estimated under heavy blur: its cameras \
+                 train free (init.confirmed_hold_blurred_focal = false)"
+            );
+        }
+        let model = RunProperModel::of(keep_rerun, choice.first_model_confirmed, held);
         cfg = run_proper_config(&cfg, model, rest);
     }
     train_and_report(TrainJob {
@@ -455,30 +468,55 @@ enum RunProperModel {
     /// The first model, not confirmed by the SfM on the first pass's renders.
     First,
     /// The first model, confirmed by that SfM ([`RerunChoice::first_model_confirmed`]): its
-    /// cameras are measured accurate.
-    ConfirmedFirst,
+    /// cameras are measured accurate, and `held` on them unless its focal was barely determined
+    /// ([`holds_confirmed_cameras`]).
+    ConfirmedFirst { held: bool },
     /// The model the SfM made on the first pass's renders.
     Renders,
 }
 
 impl RunProperModel {
-    /// From whether the renders' model is kept and whether it confirmed the first model.
-    fn of(renders_kept: bool, first_model_confirmed: bool) -> Self {
+    /// From whether the renders' model is kept, whether it confirmed the first model, and
+    /// whether the confirmed cameras are held.
+    fn of(renders_kept: bool, first_model_confirmed: bool, held: bool) -> Self {
         match (renders_kept, first_model_confirmed) {
             (true, _) => Self::Renders,
-            (false, true) => Self::ConfirmedFirst,
+            (false, true) => Self::ConfirmedFirst { held },
             (false, false) => Self::First,
         }
     }
+}
+
+/// Whether the run proper holds a confirmed first model's cameras: always for an `imported`
+/// model, and for the built-in SfM's unless the SfM estimated its focal from photos blurred
+/// beyond [`gems_init::sfm::FOCAL_ADVICE_BLUR`] of their long side (its report in `sfm_dir`,
+/// [`gems_init::sfm::SfmStats::focal_barely_determined`]) and `init.confirmed_hold_blurred_focal`
+/// is off. The check cannot measure such a model: the first pass renders it with its own focal,
+/// so the SfM on the renders inherits the focal's error and confirms it (BENCHMARKS.md, "A
+/// confirmed model whose focal blur left undetermined"). A report that cannot be read, or that
+/// an earlier version wrote without the field, holds as before.
+fn holds_confirmed_cameras(imported: bool, sfm_dir: &Path, cfg: &TrainConfig) -> bool {
+    #[derive(serde::Deserialize)]
+    struct Report {
+        #[serde(default)]
+        focal_barely_determined: bool,
+    }
+    if imported || cfg.init.confirmed_hold_blurred_focal {
+        return true;
+    }
+    let report = std::fs::read(sfm_dir.join(gems_init::sfm::REPORT_FILE))
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<Report>(&bytes).ok());
+    !report.is_some_and(|r| r.focal_barely_determined)
 }
 
 /// The configuration of the run proper after a first pass, from the run's `cfg`: from the
 /// renders' model it has the `rest` of the steps, from the first model all of them; where its
 /// initial poses are accurate (the renders' model's, or the confirmed first model's) it has
 /// straight paths first (`init.accurate_poses_straight_fraction`), otherwise `cfg`'s own paths;
-/// from the confirmed first model its exposures are held on their initial cameras: their
-/// midpoints exactly with `init.confirmed_hold_midpoint`, otherwise their mean poses by
-/// `init.confirmed_anchor_weight` (when above `cfg`'s `pose.anchor_weight`).
+/// from the confirmed first model, where it is held, its exposures are held on their initial
+/// cameras: their midpoints exactly with `init.confirmed_hold_midpoint`, otherwise their mean
+/// poses by `init.confirmed_anchor_weight` (when above `cfg`'s `pose.anchor_weight`).
 /// Either is one pass.
 fn run_proper_config(cfg: &TrainConfig, model: RunProperModel, rest: usize) -> TrainConfig {
     let mut run = cfg.clone();
@@ -488,7 +526,7 @@ fn run_proper_config(cfg: &TrainConfig, model: RunProperModel, rest: usize) -> T
     if model != RunProperModel::First {
         run.pose.straight_fraction = cfg.init.accurate_poses_straight_fraction;
     }
-    if model == RunProperModel::ConfirmedFirst {
+    if model == (RunProperModel::ConfirmedFirst { held: true }) {
         if cfg.init.confirmed_hold_midpoint {
             // The hold supersedes the soft anchor (measured without it).
             run.pose.hold_midpoint = true;
@@ -968,6 +1006,43 @@ mod tests {
     }
 
     #[test]
+    fn a_confirmed_model_is_held_unless_blur_left_its_estimated_focal_undetermined() {
+        let dir = tempfile::tempdir().unwrap();
+        let report = |name: &str, json: &str| {
+            let sfm = dir.path().join(name);
+            std::fs::create_dir_all(&sfm).unwrap();
+            std::fs::write(sfm.join(gems_init::sfm::REPORT_FILE), json).unwrap();
+            sfm
+        };
+        let barely = report(
+            "barely",
+            r#"{"focal": 228.0, "focal_barely_determined": true}"#,
+        );
+        let known = report(
+            "known",
+            r#"{"focal": 228.0, "focal_barely_determined": false}"#,
+        );
+        // Written before the field existed, and unreadable: held, as they were.
+        let older = report("older", r#"{"focal": 228.0, "focal_from_metadata": false}"#);
+        let broken = report("broken", "{");
+        let missing = dir.path().join("missing");
+        let mut cfg = TrainConfig::default();
+        assert!(!cfg.init.confirmed_hold_blurred_focal, "the default");
+        assert!(!holds_confirmed_cameras(false, &barely, &cfg));
+        for sfm in [&known, &older, &broken, &missing] {
+            assert!(
+                holds_confirmed_cameras(false, sfm, &cfg),
+                "{}",
+                sfm.display()
+            );
+        }
+        // An imported model's focal is its own camera's: held.
+        assert!(holds_confirmed_cameras(true, &barely, &cfg));
+        cfg.init.confirmed_hold_blurred_focal = true;
+        assert!(holds_confirmed_cameras(false, &barely, &cfg));
+    }
+
+    #[test]
     fn the_run_propers_paths_and_anchor_follow_where_it_starts() {
         let mut cfg = TrainConfig {
             steps: 300,
@@ -993,22 +1068,24 @@ mod tests {
             (200, 0.2, 3.0, false, 0.0)
         );
         // The first model confirmed by its renders: all the steps, accurate poses, held.
+        let held = RunProperModel::ConfirmedFirst { held: true };
+        assert_eq!(
+            paths(&run_proper_config(&cfg, held, 200)),
+            (300, 0.2, 3.0, true, 0.0)
+        );
+        // Confirmed but not held (its focal barely determined): accurate poses, free.
         assert_eq!(
             paths(&run_proper_config(
                 &cfg,
-                RunProperModel::ConfirmedFirst,
+                RunProperModel::ConfirmedFirst { held: false },
                 200
             )),
-            (300, 0.2, 3.0, true, 0.0)
+            (300, 0.2, 3.0, false, 0.0)
         );
         // Without the hold, the confirmed anchor, unless the run holds every start itself.
         cfg.init.confirmed_hold_midpoint = false;
         assert_eq!(
-            paths(&run_proper_config(
-                &cfg,
-                RunProperModel::ConfirmedFirst,
-                200
-            )),
+            paths(&run_proper_config(&cfg, held, 200)),
             (300, 0.2, 50.0, false, 0.0)
         );
         cfg.pose.hold_midpoint = true;
@@ -1020,12 +1097,7 @@ mod tests {
         cfg.pose.hold_midpoint = false;
         // A run's own heavier anchor is kept.
         cfg.pose.anchor_weight = 80.0;
-        assert_eq!(
-            run_proper_config(&cfg, RunProperModel::ConfirmedFirst, 200)
-                .pose
-                .anchor_weight,
-            80.0
-        );
+        assert_eq!(run_proper_config(&cfg, held, 200).pose.anchor_weight, 80.0);
         // The first model because the renders' failed: all the steps, the run's own paths.
         assert_eq!(
             paths(&run_proper_config(&cfg, RunProperModel::First, 200)),

@@ -368,8 +368,24 @@ pub struct InitConfig {
     /// model so confirmed (with dense points) +0.73 dB refined on the held-out views and +2.0 dB
     /// at the dataset's pose against free midpoints, where a 15 px scene whose confirmed
     /// cameras were 1.36 % off lost 1.47 dB refined (BENCHMARKS.md, "Holding a built-in SfM's
-    /// confirmed model on blurball"). false = the anchor.
+    /// confirmed model on blurball"; its focal was estimated under heavy blur, and such a model
+    /// is no longer held: `confirmed_hold_blurred_focal`). false = the anchor.
     pub confirmed_hold_midpoint: bool,
+    /// Whether a confirmed first model from the built-in SfM is held (`confirmed_hold_midpoint`
+    /// or `confirmed_anchor_weight`) also when the SfM estimated its focal from photos blurred
+    /// by more than 5 % of their long side (`gems_init::sfm::SfmStats::focal_barely_determined`:
+    /// the models whose SfM report asks for `--focal`). The check cannot measure such a model:
+    /// the first pass renders it with its own focal, so the SfM on the renders inherits that
+    /// focal's error (on eight 15 px scenes with fields of view of 45–75° the estimate was
+    /// 11–42 % off) and confirms cameras that training can still correct (1.36 % and 1.42 % of
+    /// the path's extent from the truth on the two such scenes measured). Default false: such a
+    /// model trains as a confirmed one otherwise does (all the steps, straight paths first,
+    /// dense points) with free paths: on those two scenes +1.47 / +1.48 dB refined deblurring
+    /// and +1.12 / +1.68 dB refined novel views against holding them, the midpoint +4.5 /
+    /// −1.2 dB (BENCHMARKS.md, "A confirmed model whose focal blur left undetermined"). A focal
+    /// given with `--focal` or read from EXIF (blurball: the hold gains 0.73 dB there), and an
+    /// imported model's, are held as before.
+    pub confirmed_hold_blurred_focal: bool,
     /// The run proper from a confirmed first model starts from that model's points and dense
     /// points from the first pass's depth maps (gems-pipeline's `dense` module: each training
     /// view's surface depth rendered at its trained midpoint, aligned to the model's sparse
@@ -432,6 +448,7 @@ impl Default for InitConfig {
             accurate_poses_straight_fraction: 0.15,
             confirmed_anchor_weight: 100.0,
             confirmed_hold_midpoint: true,
+            confirmed_hold_blurred_focal: false,
             confirmed_dense_points: true,
             renders_dense_points: false,
             exif_focal_prior: 0.02,
