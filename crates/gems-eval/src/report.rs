@@ -55,6 +55,11 @@ pub struct Registration {
     /// blur (`gems_init::sfm::SfmStats::advice`).
     #[serde(default)]
     pub advice: Vec<String>,
+    /// The focal was estimated under blur that barely determines it
+    /// (`gems_init::sfm::SfmStats::focal_barely_determined`; false in reports written before
+    /// the field existed).
+    #[serde(default)]
+    pub focal_barely_determined: bool,
 }
 
 /// The built-in SfM's per-photo registration of a run (`<dir>/sfm/sfm_report.json`, what

@@ -359,6 +359,7 @@ fn report_writes_html_and_figures() {
                 why_not: Some("much more blurred than the others".into()),
             }],
             advice: vec!["1 of 1 photos were not registered".into()],
+            focal_barely_determined: false,
         }),
     };
     let html_path = write_report(dir.path(), &input).unwrap();

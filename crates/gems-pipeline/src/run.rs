@@ -384,7 +384,7 @@ pub fn train_scene(req: TrainRequest) -> Result<RunOutcome, PipelineError> {
             );
             mode = InitMode::Colmap(Some(dense));
         }
-        let held = holds_confirmed_cameras(imported, &req.output.join("sfm"), &cfg);
+        let held = holds_confirmed_cameras(imported, &req.output, &cfg);
         if choice.first_model_confirmed && !keep_rerun && !held {
             description.init = format!(
                 "{}; its cameras are not held: the SfM estimated its focal under heavy blur, \
@@ -489,25 +489,16 @@ impl RunProperModel {
 
 /// Whether the run proper holds a confirmed first model's cameras: always for an `imported`
 /// model, and for the built-in SfM's unless the SfM estimated its focal from photos blurred
-/// beyond [`gems_init::sfm::FOCAL_ADVICE_BLUR`] of their long side (its report in `sfm_dir`,
-/// [`gems_init::sfm::SfmStats::focal_barely_determined`]) and `init.confirmed_hold_blurred_focal`
-/// is off. The check cannot measure such a model: the first pass renders it with its own focal,
-/// so the SfM on the renders inherits the focal's error and confirms it (BENCHMARKS.md, "A
-/// confirmed model whose focal blur left undetermined"). A report that cannot be read, or that
-/// an earlier version wrote without the field, holds as before.
-fn holds_confirmed_cameras(imported: bool, sfm_dir: &Path, cfg: &TrainConfig) -> bool {
-    #[derive(serde::Deserialize)]
-    struct Report {
-        #[serde(default)]
-        focal_barely_determined: bool,
-    }
-    if imported || cfg.init.confirmed_hold_blurred_focal {
-        return true;
-    }
-    let report = std::fs::read(sfm_dir.join(gems_init::sfm::REPORT_FILE))
-        .ok()
-        .and_then(|bytes| serde_json::from_slice::<Report>(&bytes).ok());
-    !report.is_some_and(|r| r.focal_barely_determined)
+/// beyond [`gems_init::sfm::FOCAL_ADVICE_BLUR`] of their long side (its report in
+/// `<output>/sfm`, [`gems_init::sfm::SfmStats::focal_barely_determined`]) and
+/// `init.confirmed_hold_blurred_focal` is off. The check cannot measure such a model: the first
+/// pass renders it with its own focal, so the SfM on the renders inherits the focal's error and
+/// confirms it (BENCHMARKS.md, "A confirmed model whose focal blur left undetermined"). A report
+/// that cannot be read, or that an earlier version wrote without the field, holds as before.
+fn holds_confirmed_cameras(imported: bool, output: &Path, cfg: &TrainConfig) -> bool {
+    imported
+        || cfg.init.confirmed_hold_blurred_focal
+        || !gems_eval::report::read_registration(output).is_some_and(|r| r.focal_barely_determined)
 }
 
 /// The configuration of the run proper after a first pass, from the run's `cfg`: from the
@@ -1008,22 +999,26 @@ mod tests {
     #[test]
     fn a_confirmed_model_is_held_unless_blur_left_its_estimated_focal_undetermined() {
         let dir = tempfile::tempdir().unwrap();
+        // A run's output folder with the SfM's report.
         let report = |name: &str, json: &str| {
-            let sfm = dir.path().join(name);
-            std::fs::create_dir_all(&sfm).unwrap();
-            std::fs::write(sfm.join(gems_init::sfm::REPORT_FILE), json).unwrap();
-            sfm
+            let out = dir.path().join(name);
+            std::fs::create_dir_all(out.join("sfm")).unwrap();
+            std::fs::write(out.join("sfm").join(gems_init::sfm::REPORT_FILE), json).unwrap();
+            out
         };
         let barely = report(
             "barely",
-            r#"{"focal": 228.0, "focal_barely_determined": true}"#,
+            r#"{"views": [], "focal": 228.0, "focal_barely_determined": true}"#,
         );
         let known = report(
             "known",
-            r#"{"focal": 228.0, "focal_barely_determined": false}"#,
+            r#"{"views": [], "focal": 228.0, "focal_barely_determined": false}"#,
         );
         // Written before the field existed, and unreadable: held, as they were.
-        let older = report("older", r#"{"focal": 228.0, "focal_from_metadata": false}"#);
+        let older = report(
+            "older",
+            r#"{"views": [], "focal": 228.0, "focal_from_metadata": false}"#,
+        );
         let broken = report("broken", "{");
         let missing = dir.path().join("missing");
         let mut cfg = TrainConfig::default();
